@@ -1,0 +1,37 @@
+# tactile-sl: the two commands a user needs are `make demo` and `make test`.
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+ENV := source env.sh &&
+
+.PHONY: help setup build test lint unit demo bags artwork clean
+
+help:
+	@echo "make demo   - replay the bundled bag through the pipeline and print what came out"
+	@echo "make test   - lint + the whole test suite (creates .venv and builds on first use)"
+	@echo "make setup  - create .venv and colcon build (idempotent)"
+	@echo "make bags   - regenerate bags/ from the shipped pattern (deterministic)"
+	@echo "make clean  - remove build/, install/, log/ (keeps .venv)"
+
+setup:
+	@bash tools/setup.sh
+
+build: setup
+
+lint: setup
+	@$(ENV) ruff check src tests tools
+
+unit: setup
+	@$(ENV) python -m pytest -q src tests
+
+test: setup
+	@$(ENV) ruff check src tests tools
+	@$(ENV) python -m pytest src tests
+
+demo: setup
+	@$(ENV) python tools/demo.py
+
+bags: setup
+	@$(ENV) bash tools/make_bags.sh
+
+clean:
+	rm -rf build install log

@@ -1,0 +1,5 @@
+"""Workspace pytest setup: every rclpy process the tests start stays on loopback DDS."""
+import os
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("ROS_DOMAIN_ID", str(50 + os.getpid() % 40))

@@ -1,0 +1,1 @@
+"""Image sources for the tactile-sl sensor: stereo capture, simulator, bag replay."""

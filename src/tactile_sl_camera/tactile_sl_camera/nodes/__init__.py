@@ -1,0 +1,1 @@
+"""Thin rclpy nodes: convert messages, declare parameters, call the library."""

