@@ -11,6 +11,10 @@ STAMP="$VENV/.tactile_sl_requirements.sha256"
 
 log() { printf '[setup] %s\n' "$*"; }
 
+# Serialise concurrent setups/builds of this checkout (parallel shells, helpers).
+exec 9>"$ROOT/.setup.lock"
+flock 9
+
 if [ ! -x "$VENV/bin/python" ]; then
   "$PY" -c 'import sys; assert sys.version_info[:2] == (3, 11), "Python 3.11 is required (the ros-jazzy wheels are cp311)"'
   log "creating $VENV"
