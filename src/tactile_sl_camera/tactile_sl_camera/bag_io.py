@@ -21,7 +21,6 @@ from typing import Any, Iterable, Iterator
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Schema
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import DecoderFunction, EncoderFunction, generate_dynamic, serialize_dynamic

@@ -17,7 +17,7 @@ class ImageFormatError(ValueError):
 
 
 def image_to_array(msg: Any) -> np.ndarray:
-    """View an Image message's pixels as an (H, W) or (H, W, C) uint8 array (no copy if possible)."""
+    """View an Image message's pixels as (H, W) or (H, W, C) uint8 (no copy if possible)."""
     encoding = str(msg.encoding)
     if encoding not in CHANNELS:
         raise ImageFormatError(f"unsupported image encoding {encoding!r} "

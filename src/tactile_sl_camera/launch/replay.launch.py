@@ -1,0 +1,32 @@
+"""Replay a bag's stereo images and camera_info under /tactile.
+
+ros2 launch tactile_sl_camera replay.launch.py bag:=bags/no_contact.mcap
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    params = os.path.join(get_package_share_directory("tactile_sl_camera"), "config", "replay.yaml")
+    return LaunchDescription([
+        DeclareLaunchArgument("bag", description="MCAP bag to replay"),
+        DeclareLaunchArgument("namespace", default_value="tactile"),
+        DeclareLaunchArgument("rate", default_value="1.0"),
+        DeclareLaunchArgument("loop", default_value="false"),
+        Node(
+            package="tactile_sl_camera",
+            executable="replay",
+            namespace=LaunchConfiguration("namespace"),
+            parameters=[params, {
+                "bag": LaunchConfiguration("bag"),
+                "rate": LaunchConfiguration("rate"),
+                "loop": LaunchConfiguration("loop"),
+            }],
+            output="screen",
+        ),
+    ])

@@ -1,0 +1,201 @@
+"""
+``replay``: play a bag's Image and CameraInfo topics as a camera would publish them.
+
+Messages are published as the recorded CDR bytes (no decode/re-encode), under relative
+topic names (``/tactile/left/image_raw`` in the bag -> ``left/image_raw``), so the node is
+namespaced and remapped like any camera driver. See config/replay.yaml for the parameters.
+"""
+from __future__ import annotations
+
+import importlib
+import threading
+import time
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+
+from tactile_sl_camera.bag_io import BagError, stamp_to_ns
+from tactile_sl_camera.replay import ReplayItem, ReplayPlan
+
+
+def message_class(schema_name: str) -> Any:
+    """``sensor_msgs/msg/Image`` -> the rclpy message class."""
+    package, kind, name = schema_name.split("/")
+    return getattr(importlib.import_module(f"{package}.{kind}"), name)
+
+
+def _described(text: str) -> ParameterDescriptor:
+    return ParameterDescriptor(description=text)
+
+
+class ReplayNode(Node):
+    """Publishes a bag's camera topics at the recorded rate, a multiple of it, or paced."""
+
+    def __init__(self) -> None:
+        super().__init__("replay")
+        self.declare_parameter("bag", "", _described(
+            "Path of the MCAP bag (file, or rosbag2 directory holding one .mcap)."))
+        self.declare_parameter("topics", [""], _described(
+            "Bag topics to play (absolute, or relative to bag_namespace). "
+            "Empty: every sensor_msgs/Image and CameraInfo topic."))
+        self.declare_parameter("bag_namespace", "/tactile", _described(
+            "Prefix stripped from bag topic names to form the relative published names."))
+        self.declare_parameter("rate", 1.0, _described(
+            "Playback speed: 1.0 = recorded rate, 2.0 = twice as fast, 0 = as fast as "
+            "possible (combine with wait_for_topic to go as fast as a subscriber keeps up)."))
+        self.declare_parameter("loop", False, _described("Start over at the end of the bag."))
+        self.declare_parameter("restamp", False, _described(
+            "Shift header stamps so the first frame is stamped now; one shift per pass keeps "
+            "the left/right images of a frame identically stamped."))
+        self.declare_parameter("reliability", "best_effort", _described(
+            "QoS reliability of the publishers: best_effort (sensor data) or reliable."))
+        self.declare_parameter("depth", 5, _described("QoS history depth of the publishers."))
+        self.declare_parameter("wait_for_subscribers", 0, _described(
+            "Before playing, wait until every Image topic has at least this many subscribers."))
+        self.declare_parameter("wait_for_subscribers_timeout", 10.0, _described(
+            "Seconds to wait for subscribers before playing anyway."))
+        self.declare_parameter("wait_for_topic", "", _described(
+            "Pacing: after each stereo frame, wait for a message on this topic carrying the "
+            "frame's header stamp (e.g. 'points'), so playback never outruns the consumer."))
+        self.declare_parameter("wait_for_type", "sensor_msgs/msg/PointCloud2", _described(
+            "Message type of wait_for_topic (its first field must be a std_msgs/Header)."))
+        self.declare_parameter("wait_timeout", 1.0, _described(
+            "Seconds to wait for the pacing message before moving on (logged)."))
+        self.declare_parameter("exit_on_end", True, _described(
+            "Shut the node down when the bag has been played (and loop is false)."))
+
+        p = self.get_parameter
+        bag = p("bag").value
+        if not bag:
+            raise BagError("parameter 'bag' is empty: give the path of an MCAP bag")
+        self.plan = ReplayPlan(bag, [t for t in p("topics").value if t],
+                               p("bag_namespace").value, float(p("rate").value))
+        self.loop = bool(p("loop").value)
+        self.restamp = bool(p("restamp").value)
+        self.exit_on_end = bool(p("exit_on_end").value)
+        self.wait_timeout = float(p("wait_timeout").value)
+
+        reliability = str(p("reliability").value)
+        if reliability not in ("best_effort", "reliable"):
+            raise ValueError(f"reliability must be best_effort or reliable, not {reliability!r}")
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=int(p("depth").value),
+            reliability=(ReliabilityPolicy.RELIABLE if reliability == "reliable"
+                         else qos_profile_sensor_data.reliability),
+            durability=qos_profile_sensor_data.durability)
+        self.publishers_by_topic = {
+            name: self.create_publisher(message_class(self.plan.types[bag_topic]), name, qos)
+            for bag_topic, name in self.plan.outputs.items()}
+
+        self._acked: set[int] = set()
+        self._ack = threading.Condition()
+        pace_topic = p("wait_for_topic").value
+        self.pacing = bool(pace_topic)
+        if self.pacing:
+            self.create_subscription(message_class(p("wait_for_type").value), pace_topic,
+                                     self._on_pace, 10)
+        self.min_subscribers = int(p("wait_for_subscribers").value)
+        self.subscribers_timeout = float(p("wait_for_subscribers_timeout").value)
+        self.done = threading.Event()
+        self.published = 0
+        self.get_logger().info(
+            f"replaying {self.plan.reader.path} ({self.plan.message_count} messages on "
+            f"{', '.join(self.plan.outputs.values())}) at rate "
+            f"{'max' if self.plan.rate == 0 else self.plan.rate}"
+            f"{', looping' if self.loop else ''}{', restamped' if self.restamp else ''}")
+        self._worker = threading.Thread(target=self._play, daemon=True)
+        self._worker.start()
+
+    def _on_pace(self, msg: Any) -> None:
+        with self._ack:
+            self._acked.add(stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec))
+            self._ack.notify_all()
+
+    def _wait_for_subscribers(self) -> None:
+        image_topics = [name for bag_topic, name in self.plan.outputs.items()
+                        if self.plan.types[bag_topic] == "sensor_msgs/msg/Image"]
+        deadline = time.monotonic() + self.subscribers_timeout
+        while rclpy.ok() and time.monotonic() < deadline:
+            if all(self.publishers_by_topic[t].get_subscription_count() >= self.min_subscribers
+                   for t in image_topics):
+                return
+            time.sleep(0.02)
+        self.get_logger().warning(
+            f"fewer than {self.min_subscribers} subscriber(s) after "
+            f"{self.subscribers_timeout:.1f} s; playing anyway")
+
+    def _wait_for_ack(self, stamp_ns: int) -> None:
+        with self._ack:
+            if not self._ack.wait_for(lambda: stamp_ns in self._acked, self.wait_timeout):
+                self.get_logger().warning(
+                    f"no message on the pacing topic for stamp {stamp_ns} ns within "
+                    f"{self.wait_timeout:.2f} s; moving on", throttle_duration_sec=5.0)
+            self._acked.discard(stamp_ns)
+
+    def _play(self) -> None:
+        try:
+            if self.min_subscribers > 0:
+                self._wait_for_subscribers()
+            loop_index = 0
+            while rclpy.ok():
+                base = self.get_clock().now().nanoseconds if self.restamp else None
+                self._play_pass(loop_index, base)
+                loop_index += 1
+                if not self.loop:
+                    break
+            self.get_logger().info(f"finished: {self.published} messages published")
+        except BagError as exc:
+            self.get_logger().error(str(exc))
+        finally:
+            self.done.set()
+
+    def _play_pass(self, loop_index: int, restamp_base_ns: int | None) -> None:
+        start = time.monotonic()
+        frame_stamp: int | None = None
+        for item in self.plan.items(loop_index, restamp_base_ns):
+            if self.pacing and frame_stamp is not None and item.stamp_ns != frame_stamp:
+                self._wait_for_ack(frame_stamp)
+            delay = start + item.due_s - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            if not rclpy.ok():
+                return
+            self._publish(item)
+            frame_stamp = item.stamp_ns
+        if self.pacing and frame_stamp is not None:
+            self._wait_for_ack(frame_stamp)
+
+    def _publish(self, item: ReplayItem) -> None:
+        self.publishers_by_topic[item.topic].publish(item.data)
+        self.published += 1
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = ReplayNode()
+        while rclpy.ok() and not (node.exit_on_end and node.done.is_set()):
+            rclpy.spin_once(node, timeout_sec=0.1)
+        if node.exit_on_end:
+            time.sleep(0.3)  # let the middleware deliver the last frame before tearing down
+    except (BagError, ValueError) as exc:
+        if node is None:
+            rclpy.logging.get_logger("replay").fatal(str(exc))
+        else:
+            node.get_logger().fatal(str(exc))
+        raise SystemExit(1) from None
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()

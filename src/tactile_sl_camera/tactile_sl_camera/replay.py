@@ -1,0 +1,117 @@
+"""
+Bag replay without ROS: which topics to play, under which names, and when.
+
+The ``replay`` node only publishes what :class:`ReplayPlan` yields, so the selection,
+renaming, pacing and restamping rules are tested here without a ROS graph.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Iterable, Iterator
+
+from tactile_sl_camera.bag_io import (
+    BagError,
+    BagReader,
+    header_stamp_of_cdr,
+    ns_to_stamp,
+    restamp_cdr,
+    stamp_to_ns,
+)
+
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
+DEFAULT_TYPES = (IMAGE_TYPE, CAMERA_INFO_TYPE)
+HEADER_FIRST_TYPES = {IMAGE_TYPE, CAMERA_INFO_TYPE, "sensor_msgs/msg/PointCloud2",
+                      "sensor_msgs/msg/CompressedImage", "tactile_sl_msgs/msg/SymbolArray"}
+
+
+@dataclass(frozen=True)
+class ReplayItem:
+    """One message to publish: relative topic name, type, CDR bytes and due time.
+
+    ``due_s`` is seconds after the start of this pass, already divided by the rate
+    (0 when playing as fast as possible).
+    """
+
+    topic: str
+    schema_name: str
+    data: bytes
+    due_s: float
+    stamp_ns: int
+    loop_index: int
+
+
+def relative_name(bag_topic: str, bag_namespace: str) -> str:
+    """
+    ``/tactile/left/image_raw`` -> ``left/image_raw`` for namespace ``/tactile``.
+
+    Publishing under relative names lets a user namespace or remap the replay like any node.
+    """
+    ns = "/" + bag_namespace.strip("/") if bag_namespace.strip("/") else ""
+    if ns and bag_topic.startswith(ns + "/"):
+        return bag_topic[len(ns) + 1:]
+    return bag_topic.lstrip("/")
+
+
+class ReplayPlan:
+    """
+    Selects topics of a bag and produces the publication schedule.
+
+    rate > 0 plays at ``rate`` times the recorded speed; rate == 0 plays as fast as the
+    consumer of the iterator goes (the node adds subscriber pacing on top).
+    With ``restamp``, every header stamp is shifted by one offset per pass so the images of
+    one stereo frame keep identical stamps and the spacing between frames is preserved.
+    """
+
+    def __init__(self, bag_path: str | os.PathLike, topics: Iterable[str] = (),
+                 bag_namespace: str = "/tactile", rate: float = 1.0) -> None:
+        if rate < 0:
+            raise ValueError(f"rate must be >= 0 (0 = as fast as possible), got {rate}")
+        self.reader = BagReader(bag_path)
+        self.rate = float(rate)
+        self.bag_namespace = bag_namespace
+        wanted = [t for t in topics if t]
+        if wanted:
+            absolute = [t if t.startswith("/") else self._absolute(t) for t in wanted]
+            self.reader.require_topics(absolute)
+            self.bag_topics = absolute
+        else:
+            self.bag_topics = sorted(
+                t.name for t in self.reader.topics.values()
+                if t.schema_name in DEFAULT_TYPES)
+            if not self.bag_topics:
+                have = ", ".join(f"{t.name} [{t.schema_name}]"
+                                 for t in self.reader.topics.values()) or "none"
+                raise BagError(f"{self.reader.path}: no sensor_msgs/Image or CameraInfo "
+                               f"topics to replay (the bag has: {have})")
+        self.outputs = {t: relative_name(t, bag_namespace) for t in self.bag_topics}
+        self.types = {t: self.reader.topics[t].schema_name for t in self.bag_topics}
+
+    def _absolute(self, relative: str) -> str:
+        ns = "/" + self.bag_namespace.strip("/") if self.bag_namespace.strip("/") else ""
+        return f"{ns}/{relative}"
+
+    @property
+    def message_count(self) -> int:
+        return sum(self.reader.topics[t].message_count for t in self.bag_topics)
+
+    def items(self, loop_index: int = 0, restamp_base_ns: int | None = None
+              ) -> Iterator[ReplayItem]:
+        """One pass over the bag. ``restamp_base_ns``: new stamp of the first message."""
+        start_ns: int | None = None
+        first_stamp_ns: int | None = None
+        for raw in self.reader.raw_messages(self.bag_topics):
+            if start_ns is None:
+                start_ns = raw.log_time_ns
+            due = 0.0 if self.rate == 0 else (raw.log_time_ns - start_ns) / 1e9 / self.rate
+            data, stamp_ns = raw.data, raw.log_time_ns
+            if raw.schema_name in HEADER_FIRST_TYPES:
+                stamp_ns = stamp_to_ns(*header_stamp_of_cdr(raw.data))
+                if first_stamp_ns is None:
+                    first_stamp_ns = stamp_ns
+                if restamp_base_ns is not None:
+                    stamp_ns = restamp_base_ns + (stamp_ns - first_stamp_ns)
+                    data = restamp_cdr(raw.data, *ns_to_stamp(stamp_ns))
+            yield ReplayItem(self.outputs[raw.topic], raw.schema_name, data, due, stamp_ns,
+                             loop_index)

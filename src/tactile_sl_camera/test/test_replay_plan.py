@@ -1,0 +1,66 @@
+"""Replay selection, naming, pacing and restamping rules (no ROS graph needed)."""
+import numpy as np
+import pytest
+
+from tactile_sl_camera.bag_io import BagError, BagWriter, header_stamp_of_cdr
+from tactile_sl_camera.images import image_fields
+from tactile_sl_camera.replay import ReplayPlan, relative_name
+
+
+@pytest.fixture
+def bag(tmp_path):
+    path = tmp_path / "b.mcap"
+    with BagWriter(path) as writer:
+        for i in range(3):
+            stamp = {"sec": 50, "nanosec": i * 100_000_000}
+            t_ns = 50 * 10**9 + i * 100_000_000
+            for side in ("left", "right"):
+                writer.write(f"/tactile/{side}/image_raw", "sensor_msgs/msg/Image",
+                             {"header": {"stamp": stamp, "frame_id": side},
+                              **image_fields(np.zeros((2, 2), np.uint8))}, t_ns)
+            writer.write("/tactile/ground_truth/points", "std_msgs/msg/String",
+                         {"data": "not replayed by default"}, t_ns)
+    return path
+
+
+def test_relative_names():
+    assert relative_name("/tactile/left/image_raw", "/tactile") == "left/image_raw"
+    assert relative_name("/tactile/left/image_raw", "tactile/") == "left/image_raw"
+    assert relative_name("/other/left/image_raw", "/tactile") == "other/left/image_raw"
+    assert relative_name("/left/image_raw", "") == "left/image_raw"
+
+
+def test_default_selection_is_images_and_camera_info(bag):
+    plan = ReplayPlan(bag)
+    assert sorted(plan.outputs.values()) == ["left/image_raw", "right/image_raw"]
+    assert plan.message_count == 6
+
+
+def test_rate_scales_the_schedule(bag):
+    due = [item.due_s for item in ReplayPlan(bag, rate=2.0).items()]
+    assert due == pytest.approx([0, 0, 0.05, 0.05, 0.1, 0.1])
+    assert all(item.due_s == 0 for item in ReplayPlan(bag, rate=0).items())
+
+
+def test_restamp_shifts_every_frame_by_one_offset(bag):
+    items = list(ReplayPlan(bag).items(restamp_base_ns=7 * 10**9))
+    stamps = [header_stamp_of_cdr(item.data) for item in items]
+    assert stamps == [(7, 0), (7, 0), (7, 100_000_000), (7, 100_000_000),
+                      (7, 200_000_000), (7, 200_000_000)]
+    assert [item.stamp_ns for item in items][::2] == [7 * 10**9 + k * 10**8 for k in range(3)]
+
+
+def test_requested_topic_must_exist(bag):
+    with pytest.raises(BagError, match="missing topic"):
+        ReplayPlan(bag, topics=["left/camera_info"])
+    assert ReplayPlan(bag, topics=["left/image_raw"]).message_count == 3
+
+
+def test_bag_without_camera_topics_is_an_error(tmp_path):
+    path = tmp_path / "c.mcap"
+    with BagWriter(path) as writer:
+        writer.write("/chatter", "std_msgs/msg/String", {"data": "hi"}, 1)
+    with pytest.raises(BagError, match="no sensor_msgs/Image or CameraInfo topics"):
+        ReplayPlan(path)
+    with pytest.raises(ValueError, match="rate must be >= 0"):
+        ReplayPlan(path, topics=["/chatter"], rate=-1)

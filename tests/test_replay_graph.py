@@ -1,0 +1,144 @@
+"""The replay node, run as `ros2 run` would run it, delivers a bag's frames intact over DDS."""
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image
+
+from tactile_sl_camera.bag_io import BagReader, BagWriter
+from tactile_sl_camera.images import image_fields
+
+from ros_harness import start_node, stop, wait_until
+
+pytestmark = pytest.mark.ros
+
+
+def write_test_bag(path: pathlib.Path, frames: int = 6) -> None:
+    """Random images (so any corruption shows), left and right stamped identically."""
+    rng = np.random.default_rng(7)
+    with BagWriter(path) as bag:
+        for i in range(frames):
+            stamp = {"sec": 1_700_000_000 + i, "nanosec": 987_654_321 - i}
+            t_ns = stamp["sec"] * 10**9 + stamp["nanosec"]
+            for side in ("left", "right"):
+                header = {"stamp": stamp, "frame_id": f"tactile_{side}_optical_frame"}
+                pixels = rng.integers(0, 256, (48, 64), dtype=np.uint8)
+                bag.write(f"/tactile/{side}/image_raw", "sensor_msgs/msg/Image",
+                          {"header": header, **image_fields(pixels)}, t_ns)
+                bag.write(f"/tactile/{side}/camera_info", "sensor_msgs/msg/CameraInfo",
+                          {"header": header, "height": 48, "width": 64,
+                           "distortion_model": "plumb_bob", "d": [0.0] * 5,
+                           "k": [60.0, 0, 32, 0, 60.0, 24, 0, 0, 1],
+                           "r": [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0],
+                           "p": [60.0, 0, 32, 0, 0, 60.0, 24, 0, 0, 0, 1, 0]}, t_ns)
+
+
+def collect_replay(bag: pathlib.Path, domain_id: int, tmp_path: pathlib.Path,
+                   extra_args: list[str] = ()) -> tuple[dict, int]:
+    """Run `replay` on the bag and return {topic: [(stamp_ns, data bytes)]} and its exit code."""
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    received: dict[str, list] = {}
+    node = rclpy.create_node("test_listener", namespace="/tactile", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    try:
+        for side in ("left", "right"):
+            for suffix, kind in (("image_raw", Image), ("camera_info", CameraInfo)):
+                topic = f"{side}/{suffix}"
+                received[topic] = []
+
+                def keep(msg, topic=topic):
+                    stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+                    data = bytes(msg.data) if hasattr(msg, "data") else None
+                    received[topic].append((stamp, data))
+
+                node.create_subscription(kind, topic, keep, qos)
+        process = start_node("tactile_sl_camera", "replay", domain_id, [
+            "-r", "__ns:=/tactile", "-p", f"bag:={bag}", "-p", "rate:=10.0",
+            "-p", "reliability:=reliable", "-p", "depth:=100",
+            "-p", "wait_for_subscribers:=1", *extra_args], tmp_path / "replay.log")
+        wait_until(lambda: process.poll() is not None, 30.0,
+                   lambda: executor.spin_once(timeout_sec=0.05))
+        for _ in range(20):  # drain what is still in flight
+            executor.spin_once(timeout_sec=0.05)
+        code = stop(process)
+        return received, code
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+
+
+def bag_images(path: pathlib.Path) -> dict[str, list]:
+    reader = BagReader(path)
+    out: dict[str, list] = {}
+    for raw, msg in reader.messages(reader.topics_of_type("sensor_msgs/msg/Image")):
+        topic = raw.topic.removeprefix("/tactile/")
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        out.setdefault(topic, []).append((stamp, bytes(msg.data)))
+    return out
+
+
+def test_images_arrive_with_stamps_and_bytes_intact(tmp_path, domain_id):
+    bag = tmp_path / "frames.mcap"
+    write_test_bag(bag)
+    received, code = collect_replay(bag, domain_id, tmp_path)
+    assert code == 0, (tmp_path / "replay.log").read_text()
+    expected = bag_images(bag)
+    for topic, frames in expected.items():
+        assert received[topic] == frames, f"{topic}: frames differ from the bag"
+    left = [s for s, _ in received["left/camera_info"]]
+    right = [s for s, _ in received["right/camera_info"]]
+    assert left == right == [s for s, _ in expected["left/image_raw"]]
+
+
+def test_bundled_bag_replays_intact(tmp_path, domain_id, repo):
+    bags = sorted((repo / "bags").glob("*.mcap"), key=lambda p: p.stat().st_size)
+    assert bags, "no bundled bags in bags/ (run `make bags`)"
+    received, code = collect_replay(bags[0], domain_id, tmp_path)
+    assert code == 0, (tmp_path / "replay.log").read_text()
+    expected = bag_images(bags[0])
+    assert expected, f"{bags[0]} carries no images"
+    for topic, frames in expected.items():
+        assert received[topic] == frames, f"{bags[0].name} {topic}: frames differ"
+
+
+def test_restamp_keeps_stereo_pairs_identical(tmp_path, domain_id):
+    bag = tmp_path / "frames.mcap"
+    write_test_bag(bag, frames=4)
+    received, code = collect_replay(bag, domain_id, tmp_path, ["-p", "restamp:=true"])
+    assert code == 0
+    left = [s for s, _ in received["left/image_raw"]]
+    right = [s for s, _ in received["right/image_raw"]]
+    original = [s for s, _ in bag_images(bag)["left/image_raw"]]
+    assert left == right and len(left) == 4
+    assert left[0] != original[0]
+    assert np.diff(left).tolist() == np.diff(original).tolist()
+    # pixels unchanged by restamping
+    assert [d for _, d in received["left/image_raw"]] == [
+        d for _, d in bag_images(bag)["left/image_raw"]]
+
+
+@pytest.mark.parametrize("damage, expected", [
+    ("truncate", "truncated"), ("garbage", "not an MCAP file"), ("missing", "no such bag")])
+def test_bad_bag_is_a_clear_error(tmp_path, domain_id, damage, expected):
+    bag = tmp_path / "bad.mcap"
+    if damage != "missing":
+        write_test_bag(bag, frames=2)
+        data = bag.read_bytes()
+        bag.write_bytes(data[: len(data) // 2] if damage == "truncate" else b"not a bag" + data)
+    process = start_node("tactile_sl_camera", "replay", domain_id,
+                         ["-p", f"bag:={bag}"], tmp_path / "replay.log")
+    code = process.wait(30)
+    log = (tmp_path / "replay.log").read_text()
+    assert code != 0
+    assert expected in log and str(bag) in log, log
+    assert "Traceback" not in log, log
