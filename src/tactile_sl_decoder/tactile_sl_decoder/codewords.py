@@ -1,0 +1,338 @@
+"""Codeword decoding: the pattern cell of each glyph, from its window (no rclpy).
+
+The printed M-array has the property that every ``wr x wc`` window of symbols differs from
+every other window in at least ``h = min_hamming`` cells.  A glyph's cell is therefore
+determined by the labels of its window, and up to ``floor((h - 1) / 2)`` misclassified
+cells (or ``h - 1`` unknown ones) can be corrected.
+
+Decoding is a table look-up, fully vectorised:
+
+* Windows are encoded as integers in base ``k + 1`` (digit ``k`` = unknown / missing).
+* :class:`Codebook` precomputes every observable code within the correction radius of each
+  pattern window (all substitution / erasure patterns with ``2e + u < h``), mapped to the
+  window's anchor cell; codes reachable from two windows (only if the pattern violates its
+  own ``min_hamming``) are marked ambiguous and never decode.
+* A window that does not decode is retried with its least confident label erased
+  (confidences break the tie between "one more error" and "one more unknown").
+
+Because a wrong cell is far worse than a missing one, a decoded window alone does not give a
+glyph its cell.  Every decoded window *votes* a cell for each glyph it covers (glyph at
+window position (a, b) of a window anchored at cell (r, c) gets cell (r - r0 + a, c - c0 + b));
+a glyph is accepted only with enough votes and a clear majority, its accepted lattice
+neighbours must hold the neighbouring cells, no cell may be claimed twice, and finally
+undecided glyphs are grown from agreeing decided neighbours when their own label matches.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations, product
+
+import numpy as np
+
+from tactile_sl_decoder.grid import Grid, window_indices
+
+LABEL_UNKNOWN = 255
+CELL_UNKNOWN = -1
+
+
+class PatternError(ValueError):
+    """A pattern array / window / min_hamming combination that cannot be decoded."""
+
+
+@dataclass
+class DecodeParams:
+    """Thresholds of codeword decoding and of the consistency checks."""
+
+    min_confidence: float = 0.5     # labels below this confidence count as unknown
+    max_errors: int = -1            # substitutions corrected per window; -1: (h - 1) // 2
+    max_erasures: int = -1          # unknown cells tolerated per window (no errors); -1: h - 1
+    retry_confidence: float = 0.9   # erase the least confident label (if below) and retry
+    min_votes: int = 2              # agreeing window votes needed to accept a glyph's cell
+    vote_ratio: float = 0.7         # the winning cell's share of all votes for the glyph
+    grow_iterations: int = 3        # passes extending decoded regions to undecided glyphs
+    grow_min_agree: int = 2         # decided neighbours that must agree to grow a glyph
+    mirrored: bool = False          # cameras see the artwork mirrored (columns reversed)
+
+
+@dataclass
+class Decoded:
+    """Per-glyph decoding result (arrays of length N)."""
+
+    row: np.ndarray          # int32, -1 unknown
+    col: np.ndarray          # int32, -1 unknown
+    votes: np.ndarray        # int32, agreeing votes for the accepted cell (0 if grown/none)
+    windows_decoded: int     # windows that decoded (before consistency)
+
+    @property
+    def decoded(self) -> np.ndarray:
+        """Boolean mask of glyphs with a cell."""
+        return self.row >= 0
+
+
+class Codebook:
+    """All windows of a pattern array and their correctable neighbourhoods.
+
+    ``array`` is the pattern (rows x cols, values 0..k-1); ``window`` (wr, wc); the anchor
+    of a window is its cell (wr // 2, wc // 2), so a window anchored at cell (r, c) covers
+    rows r - wr // 2 ... and columns c - wc // 2 ...
+    """
+
+    def __init__(self, array: np.ndarray, window: tuple[int, int] = (3, 3),
+                 min_hamming: int = 3, symbols: int | None = None,
+                 max_errors: int = -1, max_erasures: int = -1) -> None:
+        arr = np.asarray(array)
+        if arr.ndim != 2:
+            raise PatternError(f"pattern array must be 2-D, got shape {arr.shape}")
+        wr, wc = int(window[0]), int(window[1])
+        if wr < 1 or wc < 1 or wr > arr.shape[0] or wc > arr.shape[1]:
+            raise PatternError(f"window {wr}x{wc} does not fit the {arr.shape} pattern")
+        k = int(symbols) if symbols is not None else int(arr.max()) + 1
+        if arr.min() < 0 or arr.max() >= k:
+            raise PatternError(f"pattern values must be 0..{k - 1}")
+        h = int(min_hamming)
+        if h < 1:
+            raise PatternError("min_hamming must be at least 1")
+        self.array = arr.astype(np.int64)
+        self.rows, self.cols = arr.shape
+        self.window = (wr, wc)
+        self.anchor = (wr // 2, wc // 2)
+        self.symbols = k
+        self.min_hamming = h
+        self.n = wr * wc
+        self.base = k + 1
+        if self.n * np.log2(self.base) > 62:
+            raise PatternError("window too large to encode as a 64-bit integer")
+        self.max_errors = (h - 1) // 2 if max_errors < 0 else min(max_errors, (h - 1) // 2)
+        self.max_erasures = h - 1 if max_erasures < 0 else min(max_erasures, h - 1)
+        self.weights = self.base ** np.arange(self.n, dtype=np.int64)
+
+        # All windows, (M, n) row-major, and their anchor cells.
+        from numpy.lib.stride_tricks import sliding_window_view
+        win = sliding_window_view(self.array, (wr, wc)).reshape(-1, self.n)
+        nr, nc = self.rows - wr + 1, self.cols - wc + 1
+        ar, ac = np.meshgrid(np.arange(nr) + self.anchor[0], np.arange(nc) + self.anchor[1],
+                             indexing="ij")
+        self.windows = win
+        self.window_cells = (ar * self.cols + ac).reshape(-1)
+        exact = win @ self.weights
+        if len(np.unique(exact)) != len(exact):
+            raise PatternError("pattern has repeated windows: cells are not unique")
+        self._build_table()
+
+    def _build_table(self) -> None:
+        """Every code within the correction radius -> anchor cell (-1 if ambiguous)."""
+        n, k, unknown = self.n, self.symbols, self.symbols
+        base_codes = self.windows @ self.weights                    # (M,)
+        keys, cells, costs = [base_codes], [self.window_cells], [np.zeros(len(base_codes))]
+        h = self.min_hamming
+        for e in range(0, self.max_errors + 1):
+            for u in range(0, self.max_erasures + 1):
+                if e + u == 0 or 2 * e + u >= h:
+                    continue
+                for pos in combinations(range(n), e + u):
+                    sub_pos, era_pos = pos[:e], pos[e:]
+                    # For substitutions, every other symbol at each position: shifts 1..k-1.
+                    for shifts in product(range(1, k), repeat=e):
+                        w = self.windows.copy()
+                        for p, s in zip(sub_pos, shifts):
+                            w[:, p] = (w[:, p] + s) % k
+                        for p in era_pos:
+                            w[:, p] = unknown
+                        keys.append(w @ self.weights)
+                        cells.append(self.window_cells)
+                        costs.append(np.full(len(w), e + 0.5 * u))
+        key = np.concatenate(keys)
+        cell = np.concatenate(cells)
+        cost = np.concatenate(costs)
+        order = np.argsort(key, kind="stable")
+        key, cell, cost = key[order], cell[order], cost[order]
+        uniq, start, count = np.unique(key, return_index=True, return_counts=True)
+        out_cell = cell[start].copy()
+        out_cost = cost[start].copy()
+        # A code reachable from two different windows is ambiguous: never decode it.
+        multi = np.flatnonzero(count > 1)
+        if len(multi):
+            cmin = np.minimum.reduceat(cell, start)
+            cmax = np.maximum.reduceat(cell, start)
+            out_cell[cmin != cmax] = -1
+        self.table_keys = uniq
+        self.table_cells = out_cell
+        self.table_costs = out_cost
+
+    def lookup(self, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Anchor cell index (row * cols + col, -1 if none) and correction cost per code."""
+        codes = np.asarray(codes, dtype=np.int64)
+        pos = np.searchsorted(self.table_keys, codes)
+        pos = np.minimum(pos, len(self.table_keys) - 1)
+        hit = self.table_keys[pos] == codes
+        cell = np.where(hit, self.table_cells[pos], -1)
+        cost = np.where(cell >= 0, self.table_costs[pos], np.inf)
+        return cell, cost
+
+    def decode_windows(self, labels: np.ndarray, confidence: np.ndarray,
+                       retry_confidence: float = 0.9) -> np.ndarray:
+        """Anchor cell per window (M, n) of labels (``k`` or more = unknown), -1 if none.
+
+        A window that does not decode within the correction radius is retried with its
+        least confident known label turned into an unknown, if that confidence is below
+        ``retry_confidence``.
+        """
+        labels = np.asarray(labels, dtype=np.int64)
+        lab = np.where((labels < 0) | (labels >= self.symbols), self.symbols, labels)
+        cell, _ = self.lookup(lab @ self.weights)
+        fail = np.flatnonzero(cell < 0)
+        if len(fail):
+            conf = np.where(lab[fail] == self.symbols, np.inf, confidence[fail])
+            weakest = np.argmin(conf, axis=1)
+            weak_conf = conf[np.arange(len(fail)), weakest]
+            retry = fail[weak_conf < retry_confidence]
+            if len(retry):
+                lab2 = lab[retry].copy()
+                lab2[np.arange(len(retry)), weakest[weak_conf < retry_confidence]] = self.symbols
+                cell2, _ = self.lookup(lab2 @ self.weights)
+                cell[retry] = cell2
+        return cell
+
+
+def _group_votes(glyph: np.ndarray, cell: np.ndarray, ncells: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per glyph with votes: (glyph, winning cell, winning count, total count)."""
+    if len(glyph) == 0:
+        z = np.zeros(0, dtype=np.int64)
+        return z, z, z, z
+    key = glyph.astype(np.int64) * ncells + cell
+    uk, cnt = np.unique(key, return_counts=True)
+    g, c = uk // ncells, uk % ncells
+    order = np.lexsort((-cnt, g))                 # by glyph, most votes first
+    g, c, cnt = g[order], c[order], cnt[order]
+    first = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+    total = np.add.reduceat(cnt, first)
+    # A tie for the top cell is not a winner.
+    second = np.zeros_like(total)
+    has2 = np.r_[first[1:], len(g)] - first > 1
+    second[has2] = cnt[first[has2] + 1]
+    top = np.where(cnt[first] > second, cnt[first], 0)
+    return g[first], c[first], top, total
+
+
+class CodewordDecoder:
+    """Glyph labels + lattice -> pattern cells, with voting and consistency checks."""
+
+    def __init__(self, codebook: Codebook, params: DecodeParams | None = None) -> None:
+        self.codebook = codebook
+        self.params = params or DecodeParams()
+
+    def decode(self, grid: Grid, labels: np.ndarray, confidence: np.ndarray) -> Decoded:
+        """Decode every glyph of one image (labels 255 = unknown)."""
+        cb, p = self.codebook, self.params
+        n = grid.nbr.shape[0]
+        labels = np.asarray(labels).astype(np.int64).reshape(-1)
+        confidence = np.asarray(confidence, dtype=np.float64).reshape(-1)
+        row = np.full(n, CELL_UNKNOWN, dtype=np.int32)
+        col = np.full(n, CELL_UNKNOWN, dtype=np.int32)
+        votes_out = np.zeros(n, dtype=np.int32)
+        if n == 0:
+            return Decoded(row, col, votes_out, 0)
+        nbr = grid.nbr
+        if p.mirrored:   # image columns run opposite to pattern columns
+            nbr = nbr.reshape(n, 3, 3)[:, :, ::-1].reshape(n, 9)
+        pgrid = Grid(nbr, grid.col_vec, grid.row_vec, grid.spacing_px)
+        widx = window_indices(pgrid, cb.window)                    # (N, n) glyph indices
+        lab = np.where(confidence >= p.min_confidence, labels, LABEL_UNKNOWN)
+        lab = np.where((lab >= 0) & (lab < cb.symbols), lab, cb.symbols)
+        wl = np.where(widx >= 0, lab[np.maximum(widx, 0)], cb.symbols)
+        wc_ = np.where(widx >= 0, confidence[np.maximum(widx, 0)], 0.0)
+        # Windows with too many unknowns cannot decode anyway; skip them early.
+        n_unknown = (wl == cb.symbols).sum(axis=1)
+        todo = np.flatnonzero(n_unknown <= cb.max_erasures + 1)
+        anchor_cell = np.full(n, -1, dtype=np.int64)
+        if len(todo):
+            anchor_cell[todo] = cb.decode_windows(wl[todo], wc_[todo], p.retry_confidence)
+        ok = np.flatnonzero(anchor_cell >= 0)
+        windows_decoded = len(ok)
+
+        # Votes: every decoded window assigns a cell to each glyph it covers.
+        wr, wcw = cb.window
+        a0, b0 = cb.anchor
+        pos_r = np.repeat(np.arange(wr), wcw) - a0                 # (n,)
+        pos_c = np.tile(np.arange(wcw), wr) - b0
+        ar, ac = anchor_cell[ok] // cb.cols, anchor_cell[ok] % cb.cols
+        g = widx[ok]                                              # (K, n)
+        vr = ar[:, None] + pos_r[None, :]
+        vc = ac[:, None] + pos_c[None, :]
+        m = g >= 0
+        ncells = cb.rows * cb.cols
+        gg, cc, top, total = _group_votes(g[m], (vr * cb.cols + vc)[m], ncells)
+        accept = (top >= p.min_votes) & (top >= p.vote_ratio * total)
+        cell = np.full(n, -1, dtype=np.int64)
+        cell[gg[accept]] = cc[accept]
+        votes_out[gg[accept]] = top[accept]
+
+        cell = self._consistency(pgrid.nbr, cell)
+        for _ in range(p.grow_iterations):
+            grown = self._grow(pgrid.nbr, cell, lab)
+            if not np.any(grown != cell):
+                break
+            cell = self._consistency(pgrid.nbr, grown)
+        has = cell >= 0
+        row[has] = (cell[has] // cb.cols).astype(np.int32)
+        col[has] = (cell[has] % cb.cols).astype(np.int32)
+        return Decoded(row, col, votes_out, windows_decoded)
+
+    def _expected(self, nbr: np.ndarray, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per glyph and 8-neighbour: the neighbour's cell and the cell it implies here.
+
+        Both (N, 8), -1 where unknown.
+        """
+        cols = self.codebook.cols
+        others = [o for o in range(9) if o != 4]
+        j = nbr[:, others]
+        cj = np.where(j >= 0, cell[np.maximum(j, 0)], -1)
+        dr = np.array([o // 3 - 1 for o in others])
+        dc = np.array([o % 3 - 1 for o in others])
+        r = cj // cols - dr[None, :]
+        c = cj % cols - dc[None, :]
+        inside = (cj >= 0) & (r >= 0) & (r < self.codebook.rows) & (c >= 0) & (c < cols)
+        return cj, np.where(inside, r * cols + c, -1)
+
+    def _consistency(self, nbr: np.ndarray, cell: np.ndarray) -> np.ndarray:
+        """Drop glyphs whose decided neighbours disagree with them, and duplicate cells."""
+        cell = cell.copy()
+        for _ in range(2):
+            cj, implied = self._expected(nbr, cell)
+            known = (cj >= 0) & (cell[:, None] >= 0)
+            agree = (known & (implied == cell[:, None])).sum(axis=1)
+            disagree = (known & (implied != cell[:, None])).sum(axis=1)
+            bad = (cell >= 0) & (disagree > 0) & (disagree >= agree)
+            if not bad.any():
+                break
+            cell[bad] = -1
+        # A cell claimed by two glyphs: at least one is wrong, drop both.
+        has = np.flatnonzero(cell >= 0)
+        uniq, inv, cnt = np.unique(cell[has], return_inverse=True, return_counts=True)
+        cell[has[cnt[inv] > 1]] = -1
+        return cell
+
+    def _grow(self, nbr: np.ndarray, cell: np.ndarray, lab: np.ndarray) -> np.ndarray:
+        """Give undecided glyphs the cell implied by agreeing decided neighbours.
+
+        Only if their own label (when known) matches the pattern there and the cell is free.
+        """
+        p, cb = self.params, self.codebook
+        _, implied = self._expected(nbr, cell)
+        undecided = cell < 0
+        imp = np.where(undecided[:, None], implied, -1)
+        srt = np.sort(imp, axis=1)
+        top = srt[:, -1]
+        n_top = (imp == top[:, None]).sum(axis=1)
+        n_any = (imp >= 0).sum(axis=1)
+        label_known = lab < cb.symbols
+        pattern_val = np.where(top >= 0, cb.array.reshape(-1)[np.maximum(top, 0)], -1)
+        label_ok = np.where(label_known, pattern_val == lab, n_top >= p.grow_min_agree + 1)
+        ok = undecided & (top >= 0) & (n_top == n_any) & (n_top >= p.grow_min_agree) & label_ok
+        taken = np.zeros(cb.rows * cb.cols, dtype=bool)
+        taken[cell[cell >= 0]] = True
+        ok &= ~taken[np.maximum(top, 0)]
+        out = cell.copy()
+        out[ok] = top[ok]
+        return out

@@ -1,0 +1,166 @@
+"""Stereo: pair decoded glyphs of both images by cell, triangulate, express per contract.
+
+Points are triangulated in the rectified frame (undistort + rectify each camera's pixels
+with its CameraInfo K, D, R, P, then intersect the rays of the two rectified projections P)
+and rotated back by ``R_left^T`` into the *physical* left optical frame, as the contract
+requires.  P's 3x3 part need not equal K, and the left P may carry a translation: the
+triangulation is the exact linear least-squares intersection for arbitrary 3x4 P matrices.
+
+A stereo match must also be geometrically plausible: its rectified reprojection error
+(which for a horizontal rig is the vertical disparity) must be small and the point in front
+of both cameras.  That rejects the rare glyph decoded to a wrong cell in one image, since
+its partner in the other image then lies elsewhere on the pad.  No rclpy here.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from tactile_sl_camera.camera_info import CameraCalibration, CameraInfoError, calibration_from_msg
+
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-14)
+
+
+@dataclass
+class StereoParams:
+    """Plausibility gates of stereo matches."""
+
+    max_reprojection_px: float = 1.5   # rectified reprojection error of a triangulated point
+    min_depth_m: float = 1e-4          # z in the left optical frame
+    max_depth_m: float = 1.0
+
+
+class StereoRig:
+    """Calibration of the stereo pair, ready to rectify pixels and triangulate."""
+
+    def __init__(self, left: CameraCalibration, right: CameraCalibration,
+                 frame_id: str = "") -> None:
+        left.validate("left CameraInfo")
+        right.validate("right CameraInfo")
+        self.left, self.right, self.frame_id = left, right, frame_id
+        # Rays of the two rectified projections must not coincide (a baseline is needed).
+        c_left = _centre(left.P)
+        c_right = _centre(right.P)
+        if c_left is None or c_right is None or np.linalg.norm(c_left - c_right) < 1e-9:
+            raise CameraInfoError("left/right CameraInfo P describe no stereo baseline "
+                                  "(the right P[0,3] = -fx' * baseline must not be 0)")
+        self.baseline_m = float(np.linalg.norm(c_left - c_right))
+
+    @classmethod
+    def from_msgs(cls, left_msg: Any, right_msg: Any) -> "StereoRig":
+        """Rig from two CameraInfo messages (rclpy or bag-decoded); CameraInfoError if bad."""
+        left = calibration_from_msg(left_msg, "left CameraInfo")
+        right = calibration_from_msg(right_msg, "right CameraInfo")
+        header = getattr(left_msg, "header", None)
+        frame = ""
+        if header is not None:
+            frame = header["frame_id"] if isinstance(header, dict) else str(header.frame_id)
+        return cls(left, right, frame)
+
+    def key(self) -> tuple:
+        """Hashable identity of the calibration (to cache a rig across frames)."""
+        return tuple(np.concatenate([c.K.ravel(), c.D.ravel(), c.R.ravel(), c.P.ravel(),
+                                     [c.width, c.height]]).tolist()
+                     for c in (self.left, self.right)) + (self.frame_id,)
+
+    @staticmethod
+    def rectify(cam: CameraCalibration, uv: np.ndarray) -> np.ndarray:
+        """Raw (distorted) pixels (N, 2) -> rectified pixels of P (N, 2)."""
+        uv = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 1, 2)
+        if len(uv) == 0:
+            return np.zeros((0, 2))
+        if cam.distortion_model == "equidistant":
+            out = cv2.fisheye.undistortPoints(uv, cam.K, cam.D, R=cam.R, P=cam.P)
+        else:
+            out = cv2.undistortPoints(uv, cam.K, cam.opencv_distortion(), R=cam.R, P=cam.P,
+                                      criteria=UNDISTORT_CRITERIA)
+        return out.reshape(-1, 2)
+
+    def triangulate_rectified(self, uv_left: np.ndarray, uv_right: np.ndarray
+                              ) -> tuple[np.ndarray, np.ndarray]:
+        """Least-squares intersection in the rectified frame.
+
+        Returns points (N, 3) and the larger of the two rectified reprojection errors (px).
+        """
+        x = np.zeros((len(uv_left), 3))
+        if len(uv_left) == 0:
+            return x, np.zeros(0)
+        rows = []
+        rhs = []
+        for P, uv in ((self.left.P, uv_left), (self.right.P, uv_right)):
+            for axis in (0, 1):
+                coord = uv[:, axis:axis + 1]
+                rows.append(coord * P[2, :3] - P[axis, :3])          # (N, 3)
+                rhs.append(P[axis, 3] - coord[:, 0] * P[2, 3])       # (N,)
+        A = np.stack(rows, axis=1)                                    # (N, 4, 3)
+        b = np.stack(rhs, axis=1)                                     # (N, 4)
+        AtA = np.einsum("nki,nkj->nij", A, A)
+        Atb = np.einsum("nki,nk->ni", A, b)
+        x = np.linalg.solve(AtA, Atb[..., None])[..., 0]
+        err = np.maximum(_reproj(self.left.P, x, uv_left), _reproj(self.right.P, x, uv_right))
+        return x, err
+
+    def triangulate(self, uv_left_raw: np.ndarray, uv_right_raw: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Raw pixel pairs -> points (N, 3) in the physical left optical frame, errors (N,)."""
+        rect_l = self.rectify(self.left, uv_left_raw)
+        rect_r = self.rectify(self.right, uv_right_raw)
+        x_rect, err = self.triangulate_rectified(rect_l, rect_r)
+        # x_phys = R_left^T x_rect  (row vectors: x_rect @ R_left)
+        return x_rect @ self.left.R, err
+
+
+def _centre(P: np.ndarray) -> np.ndarray | None:
+    """Optical centre of a 3x4 projection (its right null vector), None if degenerate."""
+    M = P[:, :3]
+    if abs(np.linalg.det(M)) < 1e-12:
+        return None
+    return -np.linalg.solve(M, P[:, 3])
+
+
+def _reproj(P: np.ndarray, x: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    proj = x @ P[:, :3].T + P[:, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pix = proj[:, :2] / proj[:, 2:3]
+        err = np.linalg.norm(pix - uv, axis=1)
+    return np.where(np.isfinite(err) & (proj[:, 2] > 0), err, np.inf)
+
+
+@dataclass
+class StereoMatch:
+    """Triangulated glyph pairs (arrays of length M)."""
+
+    xyz: np.ndarray        # (M, 3) float64, metres, physical left optical frame
+    row: np.ndarray        # (M,) int32
+    col: np.ndarray        # (M,) int32
+    left_index: np.ndarray   # glyph index in the left image
+    right_index: np.ndarray  # glyph index in the right image
+    reprojection_px: np.ndarray
+    rejected: int          # cell pairs dropped by the plausibility gates
+
+
+def match_and_triangulate(rig: StereoRig, uv_left: np.ndarray, cell_left: np.ndarray,
+                          uv_right: np.ndarray, cell_right: np.ndarray, ncols: int,
+                          params: StereoParams | None = None) -> StereoMatch:
+    """Pair glyphs decoded to the same cell in both images, triangulate, gate.
+
+    Cells are ``row * ncols + col`` (-1 unknown) and must be unique per image.
+    """
+    p = params or StereoParams()
+    cell_left = np.asarray(cell_left, dtype=np.int64)
+    cell_right = np.asarray(cell_right, dtype=np.int64)
+    il = np.flatnonzero(cell_left >= 0)
+    ir = np.flatnonzero(cell_right >= 0)
+    common, a, b = np.intersect1d(cell_left[il], cell_right[ir], assume_unique=True,
+                                  return_indices=True)
+    il, ir = il[a], ir[b]
+    xyz, err = rig.triangulate(np.asarray(uv_left)[il], np.asarray(uv_right)[ir])
+    good = (err <= p.max_reprojection_px) & np.isfinite(xyz).all(axis=1)
+    good &= (xyz[:, 2] >= p.min_depth_m) & (xyz[:, 2] <= p.max_depth_m)
+    cells = common[good]
+    return StereoMatch(xyz[good], (cells // ncols).astype(np.int32),
+                       (cells % ncols).astype(np.int32), il[good], ir[good], err[good],
+                       int((~good).sum()))
