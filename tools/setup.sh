@@ -15,6 +15,26 @@ log() { printf '[setup] %s\n' "$*"; }
 exec 9>"$ROOT/.setup.lock"
 flock 9
 
+# Building the interface package needs CMake, a C/C++ compiler and the Python headers.
+missing=()
+command -v cmake >/dev/null 2>&1 || missing+=(cmake)
+command -v c++ >/dev/null 2>&1 || missing+=(g++)
+command -v make >/dev/null 2>&1 || missing+=(make)
+"$PY" -c 'import sysconfig, os, sys; sys.exit(not os.path.exists(os.path.join(sysconfig.get_paths()["include"], "Python.h")))' \
+  || missing+=(python3-dev)
+"$PY" -c 'import ensurepip' >/dev/null 2>&1 || missing+=(python3-venv)
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    log "installing system packages: ${missing[*]}"
+    DEBIAN_FRONTEND=noninteractive apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  else
+    echo "[setup] missing system packages: ${missing[*]}" >&2
+    echo "[setup] install them with: sudo apt-get install -y ${missing[*]}" >&2
+    exit 1
+  fi
+fi
+
 if [ ! -x "$VENV/bin/python" ]; then
   "$PY" -c 'import sys; assert sys.version_info[:2] == (3, 11), "Python 3.11 is required (the ros-jazzy wheels are cp311)"'
   log "creating $VENV"
@@ -38,6 +58,7 @@ fi
 # directories; point them at this venv's (idempotent: only files still naming /opt/python change).
 "$VENV/bin/python" "$ROOT/tools/fix_cmake_exports.py" "$VENV"
 
+touch "$VENV/local_setup.sh"  # an ament prefix marker; silences colcon's warning about the venv
 log "colcon build"
 # shellcheck disable=SC1091
 source "$ROOT/tools/venv_env.sh"
