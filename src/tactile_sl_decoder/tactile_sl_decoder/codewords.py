@@ -51,6 +51,8 @@ class DecodeParams:
     vote_ratio: float = 0.7         # the winning cell's share of all votes for the glyph
     grow_iterations: int = 3        # passes extending decoded regions to undecided glyphs
     grow_min_agree: int = 2         # decided neighbours that must agree to grow a glyph
+    min_component: int = 16         # smallest consistent island of decoded glyphs kept
+    island_check_px: float = 4.0    # islands near the main region must fit it (x spacing)
     mirrored: bool = False          # cameras see the artwork mirrored (columns reversed)
 
 
@@ -269,11 +271,13 @@ class CodewordDecoder:
         votes_out[gg[accept]] = top[accept]
 
         cell = self._consistency(pgrid.nbr, cell)
+        cell = self._islands(pgrid, cell)
         for _ in range(p.grow_iterations):
             grown = self._grow(pgrid.nbr, cell, lab)
             if not np.any(grown != cell):
                 break
             cell = self._consistency(pgrid.nbr, grown)
+        cell = self._islands(pgrid, cell)
         has = cell >= 0
         row[has] = (cell[has] // cb.cols).astype(np.int32)
         col[has] = (cell[has] % cb.cols).astype(np.int32)
@@ -312,6 +316,60 @@ class CodewordDecoder:
         uniq, inv, cnt = np.unique(cell[has], return_inverse=True, return_counts=True)
         cell[has[cnt[inv] > 1]] = -1
         return cell
+
+    def _islands(self, grid: Grid, cell: np.ndarray) -> np.ndarray:
+        """Keep only sizeable, mutually consistent regions of decoded glyphs.
+
+        Decoded glyphs linked by lattice neighbours holding the neighbouring cells form
+        connected regions.  A region smaller than ``min_component`` is dropped (chance
+        decodes are isolated), and a smaller region near the largest one must hold the cells
+        the largest region's lattice predicts there, or it is dropped too (a locally
+        consistent but misplaced patch, e.g. a misread that copies another pattern area).
+        """
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        p, cb = self.params, self.codebook
+        n = len(cell)
+        dec = np.flatnonzero(cell >= 0)
+        if len(dec) == 0:
+            return cell
+        others = [o for o in range(9) if o != 4]
+        _, implied = self._expected(grid.nbr, cell)
+        ok = (implied == cell[:, None]) & (cell[:, None] >= 0)
+        i, k = np.nonzero(ok)
+        j = grid.nbr[:, others][i, k]
+        graph = coo_matrix((np.ones(len(i), dtype=np.int8), (i, j)), shape=(n, n))
+        _, comp = connected_components(graph, directed=False)
+        sizes = np.bincount(comp[dec], minlength=comp.max() + 1)
+        keep = sizes[comp] >= p.min_component
+        main = int(np.argmax(sizes))
+        if grid.pts is not None and sizes[main] >= p.min_component and grid.spacing_px > 0:
+            others_dec = dec[(comp[dec] != main) & keep[dec]]
+            main_idx = dec[comp[dec] == main]
+            if len(others_dec) and len(main_idx):
+                from scipy.spatial import cKDTree
+                tree = cKDTree(grid.pts[main_idx])
+                dist, nn = tree.query(grid.pts[others_dec],
+                                      distance_upper_bound=p.island_check_px * grid.spacing_px)
+                near = np.isfinite(dist)
+                a = others_dec[near]
+                b = main_idx[nn[near]]
+                M = np.stack([grid.col_vec[b], grid.row_vec[b]], axis=2)   # (K, 2, 2)
+                d = grid.pts[a] - grid.pts[b]
+                with np.errstate(all="ignore"):
+                    steps = np.linalg.solve(M + 1e-12 * np.eye(2), d[..., None])[..., 0]
+                dc = np.rint(steps[:, 0]).astype(np.int64) * (-1 if p.mirrored else 1)
+                dr = np.rint(steps[:, 1]).astype(np.int64)
+                pred = cell[b] + dr * cb.cols + dc
+                agree = pred == cell[a]
+                votes_ok = np.bincount(comp[a], weights=agree, minlength=len(sizes))
+                votes_all = np.bincount(comp[a], minlength=len(sizes))
+                bad_comp = (votes_all > 0) & (votes_ok < 0.5 * votes_all)
+                keep &= ~bad_comp[comp]
+        out = cell.copy()
+        out[~keep] = -1
+        return out
 
     def _grow(self, nbr: np.ndarray, cell: np.ndarray, lab: np.ndarray) -> np.ndarray:
         """Give undecided glyphs the cell implied by agreeing decided neighbours.

@@ -59,16 +59,18 @@ class Grid:
     col_vec: np.ndarray    # (N, 2) float64
     row_vec: np.ndarray    # (N, 2) float64
     spacing_px: float
+    pts: np.ndarray | None = None   # (N, 2) glyph centres (u, v), pixels
 
     def neighbour(self, dr: int, dc: int) -> np.ndarray:
         """Index array (N,) of the neighbour at (dr, dc) in {-1, 0, 1}^2, -1 where missing."""
         return self.nbr[:, 3 * (dr + 1) + (dc + 1)]
 
 
-def _empty(n: int) -> Grid:
+def _empty(n: int, pts: np.ndarray | None = None) -> Grid:
     nbr = np.full((n, 9), -1, dtype=np.int64)
     nbr[:, CENTRE] = np.arange(n)
-    return Grid(nbr, np.zeros((n, 2)), np.zeros((n, 2)), 0.0)
+    return Grid(nbr, np.zeros((n, 2)), np.zeros((n, 2)), 0.0,
+                np.zeros((n, 2)) if pts is None else pts)
 
 
 def _global_frame(disp: np.ndarray, dist: np.ndarray, spacing: float) -> np.ndarray:
@@ -127,7 +129,7 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     pts = np.column_stack([np.asarray(u, np.float64), np.asarray(v, np.float64)])
     n = len(pts)
     if n < 3:
-        return _empty(n)
+        return _empty(n, pts)
     k = min(p.k_neighbours, n)
     tree = cKDTree(pts)
     dist, idx = tree.query(pts, k=k)
@@ -137,7 +139,7 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     nn = dist[:, 0]
     spacing = float(np.median(nn)) if spacing_hint <= 0 else float(spacing_hint)
     if not np.isfinite(spacing) or spacing <= 0:
-        return _empty(n)
+        return _empty(n, pts)
     col_dir = _global_frame(disp[:, :4].reshape(-1, 2), dist[:, :4].reshape(-1), spacing)
     row_dir = np.array([-col_dir[1], col_dir[0]])     # +v side of the column direction
 
@@ -164,7 +166,7 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
         nbr4 = nbr[:, [1, 3, 5, 7]]
         col_vec = _smooth(col_vec, nbr4)
         row_vec = _smooth(row_vec, nbr4)
-    return Grid(nbr, col_vec, row_vec, spacing)
+    return Grid(nbr, col_vec, row_vec, spacing, pts)
 
 
 def _assign(pts: np.ndarray, disp: np.ndarray, idx: np.ndarray, valid: np.ndarray,
@@ -185,14 +187,7 @@ def _assign(pts: np.ndarray, disp: np.ndarray, idx: np.ndarray, valid: np.ndarra
         k = np.argmin(err, axis=1)
         best = err[rows, k]
         nbr[:, o] = np.where(best < tol, idx[rows, k], -1)
-    # Mutual links: j = nbr[i, o] requires nbr[j, opposite(o)] == i.
-    for o in range(9):
-        if o == CENTRE:
-            continue
-        j = nbr[:, o]
-        has = j >= 0
-        back = np.where(has, nbr[np.maximum(j, 0), 8 - o], -1)
-        nbr[has & (back != rows), o] = -1
+    _mutual(nbr)
     # Diagonals must agree with both two-step paths that exist.
     for o, (dr, dc) in enumerate(OFFSETS):
         if dr == 0 or dc == 0:
@@ -204,7 +199,20 @@ def _assign(pts: np.ndarray, disp: np.ndarray, idx: np.ndarray, valid: np.ndarra
         path2 = np.where(via_col >= 0, nbr[np.maximum(via_col, 0), 3 * (dr + 1) + 1], -1)
         bad = ((path1 >= 0) & (path1 != d)) | ((path2 >= 0) & (path2 != d))
         nbr[(d >= 0) & bad, o] = -1
+    _mutual(nbr)
     return nbr
+
+
+def _mutual(nbr: np.ndarray) -> None:
+    """Keep only mutual links: j = nbr[i, o] requires nbr[j, 8 - o] == i (in place)."""
+    rows = np.arange(len(nbr))
+    for o in range(9):
+        if o == CENTRE:
+            continue
+        j = nbr[:, o]
+        has = j >= 0
+        back = np.where(has, nbr[np.maximum(j, 0), 8 - o], -1)
+        nbr[has & (back != rows), o] = -1
 
 
 def window_indices(grid: Grid, window: tuple[int, int]) -> np.ndarray:
