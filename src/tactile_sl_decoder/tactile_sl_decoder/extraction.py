@@ -1,0 +1,320 @@
+"""Glyph candidates from one grey image: centres, areas, spacing and resampled patches.
+
+The method (see ``docs/extraction.md``): a per-pixel adaptive threshold T(x, y) (local mean
+minus an offset), an opening (erosion then dilation) against speckle, connected regions of
+ink (the regions whose outer contours the method traces; labelling them directly gives the
+same regions and their moments in one vectorised pass), rejection of regions far smaller or
+larger than the typical glyph, and splitting of regions that hold two or three linked glyphs
+using image moments: centroid m10/m00, m01/m00, orientation from the second-order central
+moments, seeds placed along the major axis at the separation those moments imply, then a few
+nearest-seed reassignments of the region's pixels. The glyph spacing is the median
+nearest-neighbour distance of the detections; every patch is resampled so that it spans
+``patch_span`` local spacings, whatever the magnification or stretch of the pad there.
+
+Everything runs on whole images (OpenCV) or on flat per-pixel / per-glyph arrays (numpy):
+there is no Python loop over glyphs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+
+PATCH_SIZE = 18
+"""Side of a glyph patch in pixels; the classifier's input size."""
+
+_REMAP_MAX_ROWS = 32000  # cv2.remap wants maps smaller than SHRT_MAX rows
+_TILE_COLS = 32  # patches per row of the stacked sampling grid
+
+
+@dataclass
+class ExtractionParams:
+    """Tuning of :func:`extract_symbols`; the defaults suit 12-30 px glyph spacing.
+
+    Sizes that must follow the image scale are relative to the typical glyph (median region
+    area) or to the measured spacing, so one set of defaults covers near and far pads.
+    """
+
+    block_size: int = 31
+    """Side of the local-mean window of the adaptive threshold, px (odd; ~1.5-2 spacings so
+    that every window holds ink and background)."""
+    offset: float = 8.0
+    """Grey levels below the local mean a pixel must be to count as ink (the "C" of
+    cv2.adaptiveThreshold); raises the threshold above sensor noise on bare background."""
+    dark_glyphs: bool = True
+    """Ink darker than the pad (printed pattern seen in reflected light); False for bright."""
+    open_size: int = 3
+    """Side of the square erosion/dilation kernel, px (0 or 1 = no opening)."""
+    min_area_px: float = 4.0
+    """Regions smaller than this never count, whatever the typical glyph size."""
+    min_area_ratio: float = 0.3
+    """Regions below this fraction of the typical glyph area are noise."""
+    split_ratio: float = 1.55
+    """A region of at least this many typical areas holds two linked glyphs ..."""
+    triple_ratio: float = 2.5
+    """... of at least this many, three ..."""
+    max_area_ratio: float = 3.6
+    """... and one above this many is no glyph (shadow, smear, pad edge) and is dropped."""
+    split_iterations: int = 3
+    """Nearest-seed reassignments refining the centres of split regions."""
+    reject_border: bool = True
+    """Drop regions touching the image border: their centroid is that of a cut glyph."""
+    patch_size: int = PATCH_SIZE
+    """Side of the output patches, px."""
+    patch_span: float = 1.0
+    """Patch side in local glyph spacings (1.0 = from half-way to the left neighbour to
+    half-way to the right one)."""
+    default_spacing_px: float = 18.0
+    """Spacing assumed when fewer than two glyphs are found."""
+    refine: bool = True
+    """Refine single-glyph centres to the grey-weighted centroid of their patch."""
+
+
+@dataclass
+class Detections:
+    """Glyph candidates of one image as flat arrays (element i = glyph i).
+
+    Coordinates follow OpenCV: (0, 0) is the centre of the top-left pixel.
+    """
+
+    u: np.ndarray
+    """Centre column, px (float32)."""
+    v: np.ndarray
+    """Centre row, px (float32)."""
+    area: np.ndarray
+    """Ink area, px^2 (float32); a split region's area is shared among its glyphs."""
+    spacing_px: float
+    """Median nearest-neighbour distance between centres, px (0 when unknown)."""
+    patches: np.ndarray
+    """(N, patch_size, patch_size) uint8 grey patches centred on each glyph."""
+    local_spacing: np.ndarray = field(default_factory=lambda: np.zeros(0, np.float32))
+    """Per-glyph spacing used to scale its patch, px (float32)."""
+
+    def __len__(self) -> int:
+        return int(self.u.shape[0])
+
+    @staticmethod
+    def empty(patch_size: int = PATCH_SIZE) -> Detections:
+        """No glyph (blank, saturated or featureless image)."""
+        z = np.zeros(0, np.float32)
+        return Detections(z, z.copy(), z.copy(), 0.0,
+                          np.zeros((0, patch_size, patch_size), np.uint8), z.copy())
+
+
+def threshold_ink(gray: np.ndarray, params: ExtractionParams) -> np.ndarray:
+    """Binary ink mask (uint8 0/255): adaptive threshold T(x, y) = local mean - offset, opened."""
+    block = max(3, int(params.block_size) | 1)
+    mode = cv2.THRESH_BINARY_INV if params.dark_glyphs else cv2.THRESH_BINARY
+    offset = params.offset if params.dark_glyphs else -params.offset
+    mask = cv2.adaptiveThreshold(gray, 255, cv2.ADAPTIVE_THRESH_MEAN_C, mode, block, offset)
+    if params.open_size > 1:
+        kernel = np.ones((params.open_size, params.open_size), np.uint8)
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, kernel)
+    return mask
+
+
+def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) -> Detections:
+    """Find the glyphs of one grey image (H, W) uint8: centres, areas, spacing, patches."""
+    params = params or ExtractionParams()
+    gray = np.ascontiguousarray(gray)
+    if gray.ndim != 2 or gray.dtype != np.uint8:
+        raise ValueError(f"expected a 2-D uint8 grey image, got {gray.dtype} {gray.shape}")
+    if gray.size == 0:
+        return Detections.empty(params.patch_size)
+    mask = threshold_ink(gray, params)
+    count, labels, stats, centroids = cv2.connectedComponentsWithStatsWithAlgorithm(
+        mask, 8, cv2.CV_32S, cv2.CCL_BBDT)
+    if count <= 1:
+        return Detections.empty(params.patch_size)
+    pixels = stats[:, cv2.CC_STAT_AREA].astype(np.float64)
+    keep = pixels >= params.min_area_px
+    keep[0] = False  # background
+    if params.reject_border:
+        h, w = gray.shape
+        x0, y0 = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_TOP]
+        keep &= (x0 > 0) & (y0 > 0) & (x0 + stats[:, cv2.CC_STAT_WIDTH] < w) & (
+            y0 + stats[:, cv2.CC_STAT_HEIGHT] < h)
+    if not keep.any():
+        return Detections.empty(params.patch_size)
+    typical = float(np.median(pixels[keep]))
+    ratio = pixels / typical
+    keep &= (ratio >= params.min_area_ratio) & (ratio <= params.max_area_ratio)
+    glyphs = np.where(ratio >= params.triple_ratio, 3, np.where(ratio >= params.split_ratio, 2, 1))
+    glyphs[~keep] = 0
+
+    single = np.flatnonzero(glyphs == 1)
+    u = [centroids[single, 0]]
+    v = [centroids[single, 1]]
+    area = [pixels[single]]
+    multi = np.flatnonzero(glyphs >= 2)
+    if len(multi):
+        su, sv, sa = split_regions(labels, stats[multi], multi, glyphs[multi],
+                                   params.split_iterations)
+        u.append(su)
+        v.append(sv)
+        area.append(sa)
+    uu = np.concatenate(u).astype(np.float32)
+    vv = np.concatenate(v).astype(np.float32)
+    aa = np.concatenate(area).astype(np.float32)
+    spacing, local = estimate_spacing(uu, vv, params.default_spacing_px,
+                                      search_px=3.0 * np.sqrt(typical))
+    step = local * (params.patch_span / params.patch_size)
+    patches = sample_patches(gray, uu, vv, step, params.patch_size)
+    if params.refine and len(single):
+        # binary centroids are quantised by the threshold; the grey-weighted centroid of the
+        # (already resampled) patch is several times more precise under blur
+        ns = len(single)
+        du, dv = patch_centroid_offset(patches[:ns], params.dark_glyphs)
+        uu[:ns] += du * step[:ns]
+        vv[:ns] += dv * step[:ns]
+    return Detections(uu, vv, aa, spacing, patches, local)
+
+
+def patch_centroid_offset(patches: np.ndarray, dark: bool = True,
+                          radius: float = 0.45) -> tuple[np.ndarray, np.ndarray]:
+    """Grey-weighted centroid of each patch's central disc, in patch pixels from its centre.
+
+    Weights are how much darker (or brighter) than the patch mean a pixel is, inside a disc
+    of ``radius`` patch sides, which holds the glyph but not its neighbours.
+    """
+    n, size = patches.shape[0], patches.shape[1]
+    flat = patches.reshape(n, size * size).astype(np.float32)
+    mean = flat.mean(axis=1, keepdims=True)
+    weight = (mean - flat) if dark else (flat - mean)
+    np.maximum(weight, 0.0, out=weight)
+    g = np.arange(size, dtype=np.float32) - (size - 1) / 2.0
+    gx = np.broadcast_to(g[None, :], (size, size)).reshape(-1)
+    gy = np.broadcast_to(g[:, None], (size, size)).reshape(-1)
+    disc = ((gx * gx + gy * gy) <= (radius * size) ** 2).astype(np.float32)
+    weight *= disc
+    # explicit reductions: a BLAS call this thin is slower, and threads contend on small hosts
+    total = np.maximum(weight.sum(axis=1), 1e-6)
+    return (weight * gx).sum(axis=1) / total, (weight * gy).sum(axis=1) / total
+
+
+def split_regions(labels: np.ndarray, stats: np.ndarray, ids: np.ndarray, k: np.ndarray,
+                  iterations: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centres of the k glyphs in each linked region, from its moments (all regions at once).
+
+    Seeds lie on the major axis (orientation from the second-order central moments) through
+    the centroid (m10/m00, m01/m00). For k equal blobs spaced d apart on a line, the variance
+    along the axis exceeds the across-axis variance by d^2/4 (k = 2) or 2 d^2/3 (k = 3),
+    which gives d; nearest-seed reassignment of the pixels then corrects for unequal glyph
+    shapes and bent chains. Returns centres and the pixel count of each part.
+    """
+    n = len(ids)
+    x0 = stats[:, cv2.CC_STAT_LEFT].astype(np.int64)
+    y0 = stats[:, cv2.CC_STAT_TOP].astype(np.int64)
+    bw = stats[:, cv2.CC_STAT_WIDTH].astype(np.int64)
+    bh = stats[:, cv2.CC_STAT_HEIGHT].astype(np.int64)
+    sizes = bw * bh
+    r = np.repeat(np.arange(n), sizes)  # every pixel of every bounding box, region-major
+    local = np.arange(int(sizes.sum())) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    px = x0[r] + local % bw[r]
+    py = y0[r] + local // bw[r]
+    own = labels[py, px] == ids[r]
+    r, px, py = r[own], px[own].astype(np.float64), py[own].astype(np.float64)
+    m00 = np.bincount(r, minlength=n).astype(np.float64)
+    cu = np.bincount(r, px, minlength=n) / m00
+    cv = np.bincount(r, py, minlength=n) / m00
+    dx = px - cu[r]
+    dy = py - cv[r]
+    mu20 = np.bincount(r, dx * dx, minlength=n) / m00
+    mu02 = np.bincount(r, dy * dy, minlength=n) / m00
+    mu11 = np.bincount(r, dx * dy, minlength=n) / m00
+    theta = 0.5 * np.arctan2(2.0 * mu11, mu20 - mu02)
+    spread = 2.0 * np.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11 ** 2)  # lambda_max - lambda_min
+    step = np.where(k == 2, 2.0 * np.sqrt(spread), np.sqrt(1.5 * spread))
+    # seed j of region i at offset (j - (k-1)/2) * step along the axis; 3 slots, unused = inf
+    slots = np.arange(3, dtype=np.float64)
+    offset = (slots[None, :] - (k[:, None] - 1) / 2.0) * step[:, None]
+    valid = slots[None, :] < k[:, None]
+    seed_u = np.where(valid, cu[:, None] + offset * np.cos(theta)[:, None], np.inf)
+    seed_v = np.where(valid, cv[:, None] + offset * np.sin(theta)[:, None], np.inf)
+    slot = r * 3
+    for _ in range(max(1, iterations)):  # a fixed few passes over all regions' pixels
+        d2 = (px[:, None] - seed_u[r]) ** 2 + (py[:, None] - seed_v[r]) ** 2
+        slot = r * 3 + np.argmin(d2, axis=1)
+        sums = np.bincount(slot, minlength=3 * n).reshape(n, 3).astype(np.float64)
+        su = np.bincount(slot, px, minlength=3 * n).reshape(n, 3)
+        sv = np.bincount(slot, py, minlength=3 * n).reshape(n, 3)
+        ok = valid & (sums > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            seed_u = np.where(ok, su / sums, seed_u)
+            seed_v = np.where(ok, sv / sums, seed_v)
+    counts = np.bincount(slot, minlength=3 * n).reshape(n, 3).astype(np.float64)
+    ok = valid & (counts > 0)
+    return seed_u[ok], seed_v[ok], counts[ok]
+
+
+def estimate_spacing(u: np.ndarray, v: np.ndarray, default: float = 18.0,
+                     search_px: float | None = None) -> tuple[float, np.ndarray]:
+    """Global spacing (median nearest-neighbour distance) and a per-glyph local spacing.
+
+    The local spacing is the mean distance to the two nearest neighbours (both are grid
+    neighbours even at the image edge), clipped to 0.6-1.6 times the global spacing so that
+    a stray detection next to a glyph cannot shrink its patch. With ``search_px`` only pairs
+    closer than that are considered (a pair search is several times faster than k-nearest
+    queries); glyphs with no neighbour in range get the global spacing.
+    """
+    n = len(u)
+    if n < 2:
+        return 0.0, np.full(n, default, np.float32)
+    pts = np.column_stack((u, v)).astype(np.float64)
+    tree = cKDTree(pts, balanced_tree=False)
+    first = second = None
+    if search_px is not None:
+        pairs = tree.query_pairs(float(search_px), output_type="ndarray")
+        if len(pairs) >= n // 2:
+            d = np.hypot(*(pts[pairs[:, 0]] - pts[pairs[:, 1]]).T)
+            who = np.concatenate((pairs[:, 0], pairs[:, 1]))
+            dist = np.concatenate((d, d))
+            order = np.lexsort((dist, who))
+            who, dist = who[order], dist[order]
+            start = np.searchsorted(who, np.arange(n))
+            has = np.bincount(who, minlength=n)
+            first = np.where(has >= 1, dist[np.minimum(start, len(dist) - 1)], np.nan)
+            second = np.where(has >= 2, dist[np.minimum(start + 1, len(dist) - 1)], first)
+    if first is None:
+        kk = min(3, n)
+        dist, _ = tree.query(pts, k=kk)
+        first, second = dist[:, 1], dist[:, kk - 1]
+    spacing = float(np.nanmedian(first))
+    local = np.where(np.isnan(first), spacing, (first + second) / 2.0)
+    local = np.clip(local, 0.6 * spacing, 1.6 * spacing)
+    return spacing, local.astype(np.float32)
+
+
+def sample_patches(gray: np.ndarray, u: np.ndarray, v: np.ndarray, step: np.ndarray,
+                   size: int = PATCH_SIZE) -> np.ndarray:
+    """(N, size, size) bilinear patches centred on (u, v) with ``step`` image px per patch px.
+
+    One cv2.remap over a sampling grid holding all patches tiled _TILE_COLS to a row (a
+    squarish map is markedly faster than a tall one); outside the image the border pixel is
+    repeated.
+    """
+    n = len(u)
+    if n == 0:
+        return np.zeros((0, size, size), np.uint8)
+    k = _TILE_COLS
+    rows = -(-n // k)
+    pad = rows * k - n
+    uu = np.pad(np.asarray(u, np.float32), (0, pad)).reshape(rows, 1, k, 1)
+    vv = np.pad(np.asarray(v, np.float32), (0, pad)).reshape(rows, 1, k, 1)
+    ss = np.pad(np.asarray(step, np.float32), (0, pad)).reshape(rows, 1, k, 1)
+    grid = (np.arange(size, dtype=np.float32) - (size - 1) / 2.0)
+    shape = (rows, size, k, size)
+    map_x = np.broadcast_to(uu + grid.reshape(1, 1, 1, size) * ss, shape).reshape(
+        rows * size, k * size)
+    map_y = np.broadcast_to(vv + grid.reshape(1, size, 1, 1) * ss, shape).reshape(
+        rows * size, k * size)
+    out = np.empty((rows * size, k * size), np.uint8)
+    chunk = _REMAP_MAX_ROWS - _REMAP_MAX_ROWS % size
+    for start in range(0, rows * size, chunk):
+        stop = min(rows * size, start + chunk)
+        out[start:stop] = cv2.remap(gray, map_x[start:stop], map_y[start:stop],
+                                    cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(rows, size, k, size).transpose(0, 2, 1, 3).reshape(rows * k, size,
+                                                                          size)[:n]
