@@ -1,1 +1,1 @@
-"""`tactile-sl` subcommands that belong to the camera package (registered by tactile_sl_decoder.cli)."""
+"""`tactile-sl` subcommands of the camera package (registered by tactile_sl_decoder.cli)."""
