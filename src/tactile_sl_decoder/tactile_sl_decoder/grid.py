@@ -38,12 +38,12 @@ CENTRE = 4
 class GridParams:
     """Tolerances of the lattice search (relative to the local glyph spacing)."""
 
-    k_neighbours: int = 14          # candidates considered per glyph
+    k_neighbours: int = 12          # candidates considered per glyph (incl. itself)
     init_angle_deg: float = 35.0    # max angle between a displacement and a lattice direction
     init_min_len: float = 0.55      # displacement length gate for the local vectors (x spacing)
     init_max_len: float = 1.8
     match_tol: float = 0.33         # max distance from prediction to candidate (x local spacing)
-    smooth_iterations: int = 2      # passes of local-vector smoothing over the 4-neighbourhood
+    smooth_iterations: int = 1      # passes of local-vector smoothing over the 4-neighbourhood
 
 
 @dataclass
@@ -85,10 +85,11 @@ def _global_frame(disp: np.ndarray, dist: np.ndarray, spacing: float) -> np.ndar
 
 
 def _best_along(disp: np.ndarray, dist: np.ndarray, valid: np.ndarray, direction: np.ndarray,
-                spacing: float, p: GridParams) -> np.ndarray:
+                spacing: float, p: GridParams) -> tuple[np.ndarray, np.ndarray]:
     """Per glyph, the shortest neighbour displacement gated around ``direction``.
 
-    Returns (N, 2), NaN where none; ``direction`` is (2,) or per-glyph (N, 2).
+    Returns the displacement (N, 2), NaN where none, and the candidate's column in the
+    k-NN table (N,), -1 where none; ``direction`` is (2,) or per-glyph (N, 2).
     """
     direction = np.broadcast_to(direction, (disp.shape[0], 2))
     unit = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
@@ -99,8 +100,9 @@ def _best_along(disp: np.ndarray, dist: np.ndarray, valid: np.ndarray, direction
     k = np.argmin(score, axis=1)
     rows = np.arange(disp.shape[0])
     out = disp[rows, k].copy()
-    out[~np.isfinite(score[rows, k])] = np.nan
-    return out
+    none = ~np.isfinite(score[rows, k])
+    out[none] = np.nan
+    return out, np.where(none, -1, k)
 
 
 def _combine(forward: np.ndarray, backward: np.ndarray, fallback: np.ndarray) -> np.ndarray:
@@ -119,7 +121,13 @@ def _smooth(vec: np.ndarray, nbr4: np.ndarray) -> np.ndarray:
     """Median of a per-glyph vector and its found 4-neighbours' (robust to one bad one)."""
     stack = np.concatenate([vec[:, None, :], np.where((nbr4 >= 0)[..., None],
                                                       vec[np.maximum(nbr4, 0)], np.nan)], axis=1)
-    return np.nanmedian(stack, axis=1)
+    srt = np.sort(stack, axis=1)                       # NaNs sort last
+    cnt = np.isfinite(stack[..., 0]).sum(axis=1)       # (N,)
+    rows = np.arange(len(vec))
+    lo = srt[rows, np.maximum((cnt - 1) // 2, 0)]
+    hi = srt[rows, np.maximum(cnt // 2, 0)]
+    out = 0.5 * (lo + hi)
+    return np.where((cnt > 0)[:, None], out, vec)
 
 
 def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
@@ -143,29 +151,19 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     col_dir = _global_frame(disp[:, :4].reshape(-1, 2), dist[:, :4].reshape(-1), spacing)
     row_dir = np.array([-col_dir[1], col_dir[0]])     # +v side of the column direction
 
-    # Local lattice vectors, following stretching.
-    col_vec = _combine(_best_along(disp, dist, valid, col_dir, spacing, p),
-                       _best_along(disp, dist, valid, -col_dir, spacing, p), col_dir * spacing)
-    row_vec = _combine(_best_along(disp, dist, valid, row_dir, spacing, p),
-                       _best_along(disp, dist, valid, -row_dir, spacing, p), row_dir * spacing)
-
-    nbr = None
-    for it in range(p.smooth_iterations + 1):
-        nbr = _assign(pts, disp, idx, valid, col_vec, row_vec, p)
-        if it == p.smooth_iterations:
-            break
-        # Re-estimate the local vectors from the links found, then smooth them.
-        right, left, down, up = nbr[:, 5], nbr[:, 3], nbr[:, 7], nbr[:, 1]
-
-        def step(j: np.ndarray) -> np.ndarray:
-            out = np.where((j >= 0)[:, None], pts[np.maximum(j, 0)] - pts, np.nan)
-            return out
-
-        col_vec = _combine(step(right), step(left), col_vec)
-        row_vec = _combine(step(down), step(up), row_vec)
-        nbr4 = nbr[:, [1, 3, 5, 7]]
+    # Local lattice vectors, following stretching: the best-aligned neighbour each way.
+    steps = [_best_along(disp, dist, valid, d, spacing, p)
+             for d in (col_dir, -col_dir, row_dir, -row_dir)]
+    col_vec = _combine(steps[0][0], steps[1][0], col_dir * spacing)
+    row_vec = _combine(steps[2][0], steps[3][0], row_dir * spacing)
+    rows = np.arange(n)
+    nbr4 = np.stack([np.where(k >= 0, idx[rows, np.maximum(k, 0)], -1) for _, k in steps],
+                    axis=1)
+    # Smooth them over the 4-neighbourhood (a median: one wrong link does not matter).
+    for _ in range(p.smooth_iterations):
         col_vec = _smooth(col_vec, nbr4)
         row_vec = _smooth(row_vec, nbr4)
+    nbr = _assign(pts, disp, idx, valid, col_vec, row_vec, p)
     return Grid(nbr, col_vec, row_vec, spacing, pts)
 
 
@@ -175,18 +173,24 @@ def _assign(pts: np.ndarray, disp: np.ndarray, idx: np.ndarray, valid: np.ndarra
     n = len(pts)
     rows = np.arange(n)
     local = np.minimum(np.linalg.norm(col_vec, axis=1), np.linalg.norm(row_vec, axis=1))
-    tol = p.match_tol * local
+    tol2 = (p.match_tol * local) ** 2
+    others = np.array([o for o in range(9) if o != CENTRE])
+    # Predicted displacement of every off-centre neighbour, (N, 8, 2); all at once.
+    pred = (OFFSETS[others, 1][None, :, None] * col_vec[:, None, :]
+            + OFFSETS[others, 0][None, :, None] * row_vec[:, None, :])
+    # Squared distances |disp - pred|^2, (N, 8, K), as plain elementwise operations.
+    du = disp[:, None, :, 0] - pred[:, :, None, 0]
+    dv = disp[:, None, :, 1] - pred[:, :, None, 1]
+    err = du * du
+    err += dv * dv
+    if not valid.all():
+        err[~np.broadcast_to(valid[:, None, :], err.shape)] = np.inf
+    k = np.argmin(err, axis=2)                                          # (N, 8)
+    best = np.take_along_axis(err, k[..., None], axis=2)[..., 0]
+    found = np.take_along_axis(idx, k, axis=1)
     nbr = np.full((n, 9), -1, dtype=np.int64)
     nbr[:, CENTRE] = rows
-    for o, (dr, dc) in enumerate(OFFSETS):
-        if o == CENTRE:
-            continue
-        pred = dc * col_vec + dr * row_vec                      # (N, 2)
-        err = np.linalg.norm(disp - pred[:, None, :], axis=2)
-        err = np.where(valid, err, np.inf)
-        k = np.argmin(err, axis=1)
-        best = err[rows, k]
-        nbr[:, o] = np.where(best < tol, idx[rows, k], -1)
+    nbr[:, others] = np.where(best < tol2[:, None], found, -1)
     _mutual(nbr)
     # Diagonals must agree with both two-step paths that exist.
     for o, (dr, dc) in enumerate(OFFSETS):

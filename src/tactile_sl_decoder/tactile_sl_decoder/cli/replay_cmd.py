@@ -1,0 +1,113 @@
+"""`tactile-sl replay IN.mcap -o OUT.mcap [--pattern P.yaml]`: the decoder, offline.
+
+Runs the same :class:`~tactile_sl_decoder.pipeline.StereoPipeline` as the ``decoder`` node
+over every stereo frame of a bag and writes ``/tactile/points`` (contract PointCloud2) for
+each frame that produced at least one point, stamped exactly like its input frame.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``replay`` subcommand."""
+    p = subparsers.add_parser(
+        "replay", help="decode a bag offline into /tactile/points (same pipeline as the node)",
+        description="Decode every stereo frame of IN.mcap (images + camera_info) and write "
+                    "the point clouds to OUT.mcap as /tactile/points.")
+    p.add_argument("input", metavar="IN.mcap", help="bag with /tactile/{left,right}/image_raw "
+                   "and /tactile/{left,right}/camera_info")
+    p.add_argument("-o", "--output", metavar="OUT.mcap", required=True,
+                   help="bag to write (/tactile/points)")
+    p.add_argument("--pattern", metavar="P.yaml", default=None,
+                   help="pattern file (default: the pattern the project ships)")
+    p.add_argument("--classifier", metavar="WEIGHTS", default=None,
+                   help="classifier weights (default: the shipped ones)")
+    p.add_argument("--mirrored", action="store_true",
+                   help="the cameras see the artwork mirrored (sensor setting)")
+    p.add_argument("--namespace", default="/tactile", help="topic namespace of the bag")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Replay a bag; exit status 0 on success, 1 on bad input files."""
+    from tactile_sl_camera.bag_io import BagError, BagWriter
+    from tactile_sl_camera.clouds import cloud_fields
+    from tactile_sl_camera.images import ImageFormatError, to_gray
+    from tactile_sl_decoder.codewords import PatternError
+    from tactile_sl_decoder.e2e_metrics import progress_bar
+    from tactile_sl_decoder.pipeline import (
+        PatternSpec,
+        PipelineInputError,
+        PipelineParams,
+        StereoPipeline,
+        bag_frames,
+        bag_topics,
+        count_bag_frames,
+    )
+
+    out_path = Path(args.output)
+    if Path(args.input).resolve() == out_path.resolve():
+        print("tactile-sl replay: OUT.mcap must differ from IN.mcap", file=sys.stderr)
+        return 2
+    try:
+        pattern = PatternSpec.load(args.pattern)
+        classifier = None
+        if args.classifier:
+            from tactile_sl_decoder.classifier import Classifier
+            classifier = Classifier.load(args.classifier)
+        params = PipelineParams()
+        params.decode.mirrored = bool(args.mirrored)
+        pipeline = StereoPipeline(pattern, classifier, params)
+        pipeline._classifier()       # load weights now: fail before touching the output
+        total = count_bag_frames(args.input, args.namespace)
+    except (BagError, PatternError, OSError, ValueError) as exc:
+        print(f"tactile-sl replay: {exc}", file=sys.stderr)
+        return 1
+    topic = bag_topics(args.namespace)["left_image"].rsplit("/left/", 1)[0] + "/points"
+    show = not args.no_progress
+    written = skipped = empty = 0
+    t0 = time.perf_counter()
+    try:
+        with BagWriter(out_path) as writer:
+            for i, frame in enumerate(bag_frames(args.input, args.namespace,
+                                                 ground_truth=False)):
+                if show:
+                    progress_bar(sys.stderr, i + 1, total, "replay")
+                try:
+                    if frame.left_info is None or frame.right_info is None:
+                        raise PipelineInputError("no camera_info for this frame")
+                    result = pipeline.process(to_gray(frame.left_image),
+                                              to_gray(frame.right_image),
+                                              frame.left_info, frame.right_info)
+                except (PipelineInputError, ImageFormatError) as exc:
+                    skipped += 1
+                    if show:
+                        sys.stderr.write("\n")
+                    print(f"tactile-sl replay: frame {frame.stamp[0]}.{frame.stamp[1]:09d} "
+                          f"skipped: {exc}", file=sys.stderr)
+                    continue
+                if len(result.points) == 0:
+                    empty += 1
+                    continue
+                msg = cloud_fields(result.points, frame.stamp, result.frame_id)
+                writer.write(topic, "sensor_msgs/msg/PointCloud2", msg, frame.stamp_ns)
+                written += 1
+    except BagError as exc:
+        print(f"\ntactile-sl replay: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        pipeline.close()
+    if show:
+        sys.stderr.write("\n")
+    dt = time.perf_counter() - t0
+    frames = written + skipped + empty
+    print(f"replay: {frames} stereo frames in {dt:.1f} s ({frames / max(dt, 1e-9):.1f} fps): "
+          f"{written} clouds written to {out_path}, {empty} without points, {skipped} skipped",
+          file=sys.stderr)
+    return 0

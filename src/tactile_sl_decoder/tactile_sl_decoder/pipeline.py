@@ -1,0 +1,518 @@
+"""The stereo pipeline, one place for the ROS node and offline replay (no rclpy).
+
+images -> glyph extraction -> classification -> lattice + codeword decoding (per image) ->
+stereo pairing by cell -> triangulation -> contract PointCloud2 points.
+
+:class:`StereoPipeline` is used by the ``decoder`` node (both from images and from the stage
+nodes' SymbolArrays) and by ``tactile-sl replay``, so the ROS graph and the offline replay
+produce identical points for the same input.  Inputs are checked here (sizes against
+CameraInfo, degenerate calibration) and problems raise :class:`PipelineInputError` with a
+message meant for the user; callers skip the frame and carry on.
+"""
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from tactile_sl_camera.camera_info import CameraInfoError
+from tactile_sl_camera.clouds import POINT_DTYPE, pack_points
+from tactile_sl_decoder.codewords import Codebook, CodewordDecoder, DecodeParams
+from tactile_sl_decoder.grid import GridParams, build_grid
+from tactile_sl_decoder.stereo import StereoParams, StereoRig, match_and_triangulate
+
+LABEL_UNKNOWN = 255
+
+
+class PipelineInputError(ValueError):
+    """A stereo frame the pipeline cannot process (the message says why)."""
+
+
+@dataclass
+class Glyphs:
+    """Glyphs of one image as flat arrays (the SymbolArray fields, without ROS).
+
+    Coordinates are raw (distorted) pixels, OpenCV convention.  ``row``/``col`` are -1 until
+    decoded, ``label`` 255 and ``confidence`` 0 until classified.
+    """
+
+    u: np.ndarray
+    v: np.ndarray
+    label: np.ndarray
+    confidence: np.ndarray
+    spacing_px: float = 0.0
+    image_width: int = 0
+    image_height: int = 0
+    area: np.ndarray | None = None
+    patches: np.ndarray | None = None     # (N, P, P) uint8
+    row: np.ndarray | None = None
+    col: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        self.u = np.asarray(self.u, dtype=np.float32).reshape(-1)
+        self.v = np.asarray(self.v, dtype=np.float32).reshape(-1)
+        n = len(self.u)
+        if len(self.v) != n:
+            raise PipelineInputError(f"glyph arrays differ in length (u {n}, v {len(self.v)})")
+        self.label = _field(self.label, n, np.uint8, LABEL_UNKNOWN, "label")
+        self.confidence = _field(self.confidence, n, np.float32, 0.0, "confidence")
+        self.area = _field(self.area, n, np.float32, 0.0, "area")
+        self.row = _field(self.row, n, np.int32, -1, "row")
+        self.col = _field(self.col, n, np.int32, -1, "col")
+
+    def __len__(self) -> int:
+        return len(self.u)
+
+    @property
+    def decoded(self) -> np.ndarray:
+        """Mask of glyphs with a cell."""
+        return self.row >= 0
+
+
+def _field(value: Any, n: int, dtype: Any, fill: Any, name: str) -> np.ndarray:
+    if value is None:
+        return np.full(n, fill, dtype=dtype)
+    arr = np.asarray(value, dtype=dtype).reshape(-1)
+    if len(arr) != n:
+        raise PipelineInputError(f"glyph field {name!r} has {len(arr)} values, expected {n}")
+    return arr
+
+
+@dataclass
+class PipelineParams:
+    """Everything tunable in the pipeline (the node exposes these as ROS parameters)."""
+
+    grid: GridParams = field(default_factory=GridParams)
+    decode: DecodeParams = field(default_factory=DecodeParams)
+    stereo: StereoParams = field(default_factory=StereoParams)
+    extraction: Any = None          # tactile_sl_decoder.extraction.ExtractionParams
+    threads: int = 2                # process left and right concurrently (OpenCV/numpy)
+
+
+@dataclass
+class StereoResult:
+    """What one stereo frame produced."""
+
+    points: np.ndarray             # structured POINT_DTYPE array (x, y, z, row, col)
+    left: Glyphs
+    right: Glyphs
+    timings_ms: dict[str, float]
+    rejected_pairs: int = 0        # cell pairs dropped by the stereo plausibility gates
+    frame_id: str = ""
+
+
+@dataclass
+class PatternSpec:
+    """The parts of a pattern the decoder needs."""
+
+    array: np.ndarray
+    window: tuple[int, int] = (3, 3)
+    min_hamming: int = 3
+    symbols: int = 3
+    pitch_m: float = 0.0
+
+    @classmethod
+    def from_pattern(cls, pattern: Any) -> "PatternSpec":
+        """From a :class:`tactile_sl_decoder.pattern.Pattern` (or anything shaped like it)."""
+        if isinstance(pattern, PatternSpec):
+            return pattern
+        c = pattern.constraints
+        return cls(np.asarray(pattern.array, np.uint8), tuple(c.window), int(c.min_hamming),
+                   int(c.symbols), float(getattr(pattern, "pitch_m", 0.0)))
+
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> "PatternSpec":
+        """Load a contract pattern YAML (default: the shipped pattern)."""
+        from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
+
+        return cls.from_pattern(load_pattern(path or default_pattern_path()))
+
+
+class StereoPipeline:
+    """Stereo frames in, contract points out; holds the codebook, classifier and rig cache."""
+
+    def __init__(self, pattern: Any, classifier: Any = None,
+                 params: PipelineParams | None = None,
+                 extractor: Callable[[np.ndarray, Any], Any] | None = None) -> None:
+        self.pattern = PatternSpec.from_pattern(pattern)
+        self.params = params or PipelineParams()
+        self.codebook = Codebook(self.pattern.array, self.pattern.window,
+                                 self.pattern.min_hamming, self.pattern.symbols,
+                                 self.params.decode.max_errors, self.params.decode.max_erasures)
+        self.decoder = CodewordDecoder(self.codebook, self.params.decode)
+        self.classifier = classifier
+        self._extractor = extractor
+        self._rig: StereoRig | None = None
+        self._rig_key: tuple | None = None
+        self._pool = ThreadPoolExecutor(max_workers=2) if self.params.threads > 1 else None
+
+    # ------------------------------------------------------------------ stages
+
+    def _extract(self, gray: np.ndarray) -> Any:
+        if self._extractor is None:
+            from tactile_sl_decoder.extraction import extract_symbols
+
+            self._extractor = extract_symbols
+        return self._extractor(gray, self.params.extraction)
+
+    def _classifier(self) -> Any:
+        if self.classifier is None:
+            from tactile_sl_decoder.classifier import Classifier
+
+            self.classifier = Classifier.load()
+        return self.classifier
+
+    def _map(self, fn: Callable[[Any], Any], a: Any, b: Any) -> tuple[Any, Any]:
+        if self._pool is None:
+            return fn(a), fn(b)
+        fb = self._pool.submit(fn, b)
+        ra = fn(a)
+        return ra, fb.result()
+
+    def extract_pair(self, left_gray: np.ndarray, right_gray: np.ndarray
+                     ) -> tuple[Glyphs, Glyphs]:
+        """Glyph candidates (unlabelled) of both images."""
+        def run(gray: np.ndarray) -> Glyphs:
+            det = self._extract(gray)
+            return Glyphs(det.u, det.v, None, None, float(det.spacing_px), gray.shape[1],
+                          gray.shape[0], det.area, det.patches)
+        return self._map(run, left_gray, right_gray)
+
+    def classify_pair(self, left: Glyphs, right: Glyphs) -> None:
+        """Label both images' glyphs in one batch (in place)."""
+        n = len(left)
+        patches = [g.patches for g in (left, right) if g.patches is not None and len(g)]
+        if not patches:
+            return
+        label, conf = self._classifier().predict(np.concatenate(patches))
+        label = np.asarray(label, np.uint8)
+        conf = np.asarray(conf, np.float32)
+        if len(left) and left.patches is not None:
+            left.label, left.confidence = label[:n], conf[:n]
+            label, conf = label[n:], conf[n:]
+        if len(right) and right.patches is not None:
+            right.label, right.confidence = label, conf
+
+    def decode(self, glyphs: Glyphs) -> Glyphs:
+        """Give each glyph of one image its cell (in place; returns it)."""
+        if len(glyphs) == 0:
+            return glyphs
+        grid = build_grid(glyphs.u, glyphs.v, self.params.grid, 0.0)
+        res = self.decoder.decode(grid, glyphs.label, glyphs.confidence)
+        glyphs.row, glyphs.col = res.row, res.col
+        if glyphs.spacing_px <= 0:
+            glyphs.spacing_px = grid.spacing_px
+        return glyphs
+
+    def decode_pair(self, left: Glyphs, right: Glyphs) -> None:
+        """Decode both images (concurrently when threads > 1)."""
+        self._map(self.decode, left, right)
+
+    def rig(self, left_info: Any, right_info: Any) -> StereoRig:
+        """Stereo rig of two CameraInfo messages (or a StereoRig), cached across frames."""
+        if isinstance(left_info, StereoRig):
+            return left_info
+        key = (_info_key(left_info), _info_key(right_info))
+        if key != self._rig_key or self._rig is None:
+            try:
+                self._rig = StereoRig.from_msgs(left_info, right_info)
+            except CameraInfoError as exc:
+                self._rig, self._rig_key = None, None
+                raise PipelineInputError(str(exc)) from exc
+            self._rig_key = key
+        return self._rig
+
+    def triangulate(self, left: Glyphs, right: Glyphs, rig: StereoRig
+                    ) -> tuple[np.ndarray, int]:
+        """Contract points from two decoded images, and the count of rejected pairs."""
+        ncols = self.codebook.cols
+        cl = np.where(left.row >= 0, left.row.astype(np.int64) * ncols + left.col, -1)
+        cr = np.where(right.row >= 0, right.row.astype(np.int64) * ncols + right.col, -1)
+        uv_l = np.column_stack([left.u, left.v]).astype(np.float64)
+        uv_r = np.column_stack([right.u, right.v]).astype(np.float64)
+        m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, self.params.stereo)
+        return pack_points(m.xyz, m.row, m.col), m.rejected
+
+    # ------------------------------------------------------------------ whole frames
+
+    def process(self, left_gray: np.ndarray, right_gray: np.ndarray, left_info: Any,
+                right_info: Any,
+                label_hook: Callable[[Glyphs, Glyphs], None] | None = None) -> StereoResult:
+        """One stereo pair of grey images (H, W) uint8 + CameraInfo -> points.
+
+        ``label_hook`` (tests, robustness benchmarks) may alter labels after classification.
+        """
+        t0 = time.perf_counter()
+        rig = self.rig(left_info, right_info)
+        _check_image(left_gray, rig.left, "left")
+        _check_image(right_gray, rig.right, "right")
+        t1 = time.perf_counter()
+        left, right = self.extract_pair(left_gray, right_gray)
+        t2 = time.perf_counter()
+        self.classify_pair(left, right)
+        if label_hook is not None:
+            label_hook(left, right)
+        t3 = time.perf_counter()
+        result = self._finish(left, right, rig)
+        result.timings_ms.update(check=1e3 * (t1 - t0), extract=1e3 * (t2 - t1),
+                                 classify=1e3 * (t3 - t2))
+        result.timings_ms["total"] = 1e3 * (time.perf_counter() - t0)
+        return result
+
+    def process_symbols(self, left: Glyphs, right: Glyphs, left_info: Any,
+                        right_info: Any) -> StereoResult:
+        """Two labelled SymbolArrays (as :class:`Glyphs`) + CameraInfo -> points.
+
+        This is the path of the chained stage nodes; it runs exactly the same decoding and
+        triangulation as :meth:`process`.
+        """
+        t0 = time.perf_counter()
+        rig = self.rig(left_info, right_info)
+        for g, cam, side in ((left, rig.left, "left"), (right, rig.right, "right")):
+            if g.image_width and g.image_height and (g.image_width, g.image_height) != (
+                    cam.width, cam.height):
+                raise PipelineInputError(
+                    f"{side} symbols come from a {g.image_width}x{g.image_height} image but "
+                    f"the {side} CameraInfo is {cam.width}x{cam.height}")
+        left = Glyphs(left.u, left.v, left.label, left.confidence, left.spacing_px,
+                      left.image_width, left.image_height, left.area, left.patches)
+        right = Glyphs(right.u, right.v, right.label, right.confidence, right.spacing_px,
+                       right.image_width, right.image_height, right.area, right.patches)
+        result = self._finish(left, right, rig)
+        result.timings_ms["total"] = 1e3 * (time.perf_counter() - t0)
+        return result
+
+    def _finish(self, left: Glyphs, right: Glyphs, rig: StereoRig) -> StereoResult:
+        t0 = time.perf_counter()
+        self.decode_pair(left, right)
+        t1 = time.perf_counter()
+        points, rejected = self.triangulate(left, right, rig)
+        t2 = time.perf_counter()
+        return StereoResult(points, left, right,
+                            {"decode": 1e3 * (t1 - t0), "stereo": 1e3 * (t2 - t1)},
+                            rejected, rig.frame_id)
+
+    def close(self) -> None:
+        """Stop the worker thread."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=False)
+            self._pool = None
+
+
+def _info_key(info: Any) -> tuple:
+    def get(name: str) -> Any:
+        if isinstance(info, dict):
+            return info.get(name, info.get(name.upper()))
+        return getattr(info, name, None)
+    header = get("header")
+    frame = ""
+    if header is not None:
+        frame = header["frame_id"] if isinstance(header, dict) else getattr(header, "frame_id", "")
+    vals = []
+    for name in ("k", "d", "r", "p"):
+        value = get(name)
+        vals.append(tuple(float(x) for x in value) if value is not None else None)
+    return (get("width"), get("height"), get("distortion_model"), frame, *vals)
+
+
+def _check_image(gray: np.ndarray, cam: Any, side: str) -> None:
+    if gray.ndim != 2 or gray.size == 0:
+        raise PipelineInputError(f"{side} image is empty or not a grey image "
+                                 f"(shape {gray.shape})")
+    h, w = gray.shape
+    if (w, h) != (cam.width, cam.height):
+        raise PipelineInputError(f"{side} image is {w}x{h} but its CameraInfo says "
+                                 f"{cam.width}x{cam.height}")
+
+
+def empty_points() -> np.ndarray:
+    """A cloud with no point (frames that decoded nothing)."""
+    return np.zeros(0, dtype=POINT_DTYPE)
+
+
+# ---------------------------------------------------------------------- bags (offline)
+
+
+@dataclass
+class BagFrame:
+    """One stereo frame of a bag: the four input messages (decoded) and ground truth."""
+
+    stamp: tuple[int, int]
+    left_image: Any
+    right_image: Any
+    left_info: Any
+    right_info: Any
+    ground_truth: Any = None
+
+    @property
+    def stamp_ns(self) -> int:
+        """Stamp in nanoseconds (for sorting and keys; the message keeps the exact ints)."""
+        return self.stamp[0] * 1_000_000_000 + self.stamp[1]
+
+
+def bag_topics(namespace: str = "/tactile") -> dict[str, str]:
+    """Topic of each frame part in a bag recorded in ``namespace``."""
+    ns = namespace.rstrip("/")
+    return {"left_image": f"{ns}/left/image_raw", "right_image": f"{ns}/right/image_raw",
+            "left_info": f"{ns}/left/camera_info", "right_info": f"{ns}/right/camera_info",
+            "ground_truth": f"{ns}/ground_truth/points"}
+
+
+def count_bag_frames(path: str | Path, namespace: str = "/tactile") -> int:
+    """Number of left images in a bag (for progress bars)."""
+    from tactile_sl_camera.bag_io import BagReader
+
+    reader = BagReader(path)
+    topic = bag_topics(namespace)["left_image"]
+    return reader.topics[topic].message_count if topic in reader.topics else 0
+
+
+def bag_frames(path: str | Path, namespace: str = "/tactile",
+               ground_truth: bool = True) -> Any:
+    """Stereo frames of a bag, grouped by exact header stamp, in stamp order.
+
+    Messages of one frame may come in any order; a frame is complete once both images are
+    there.  CameraInfo may be sent less often than images: the latest one of each side is
+    used then.  Raises ``BagError`` for unreadable bags or missing image topics.
+    """
+    from tactile_sl_camera.bag_io import BagReader, header_stamp_of_cdr
+
+    reader = BagReader(path)
+    topics = bag_topics(namespace)
+    reader.require_topics([topics["left_image"], topics["right_image"],
+                           topics["left_info"], topics["right_info"]])
+    wanted = [topics[k] for k in ("left_image", "right_image", "left_info", "right_info")]
+    if ground_truth and topics["ground_truth"] in reader.topics:
+        wanted.append(topics["ground_truth"])
+    part_of = {v: k for k, v in topics.items()}
+    pending: dict[tuple[int, int], dict[str, Any]] = {}
+    latest_info: dict[str, Any] = {}
+
+    def flush(up_to: tuple[int, int] | None) -> Any:
+        for stamp in sorted(pending):
+            if up_to is not None and stamp >= up_to:
+                break
+            parts = pending.pop(stamp)
+            for side in ("left_info", "right_info"):
+                if side in parts:
+                    latest_info[side] = parts[side]
+            if "left_image" in parts and "right_image" in parts:
+                left_info = parts.get("left_info", latest_info.get("left_info"))
+                right_info = parts.get("right_info", latest_info.get("right_info"))
+                yield BagFrame(stamp, parts["left_image"], parts["right_image"], left_info,
+                               right_info, parts.get("ground_truth"))
+
+    for raw, msg in reader.messages(wanted):
+        stamp = tuple(int(x) for x in header_stamp_of_cdr(raw.data))
+        # log time = stamp in our bags, but be tolerant: only flush frames well behind.
+        yield from flush(_minus(stamp, 1))
+        pending.setdefault(stamp, {})[part_of[raw.topic]] = msg
+    yield from flush(None)
+
+
+def _minus(stamp: tuple[int, ...], seconds: int) -> tuple[int, int]:
+    return (stamp[0] - seconds, stamp[1])
+
+
+# ---------------------------------------------------------------------- stereo pairing
+
+
+@dataclass
+class SyncEvent:
+    """What :class:`StereoSync` decided for an incoming message."""
+
+    pairs: list[tuple[int, Any, Any]] = field(default_factory=list)   # (stamp_ns, left, right)
+    dropped: list[tuple[str, int, str]] = field(default_factory=list)  # (side, stamp, reason)
+
+
+class StereoSync:
+    """Pairs left/right messages by header stamp: exact stamps first, then within a slop.
+
+    Unpaired messages wait in bounded per-side queues; a message older than the newest
+    paired frame, or pushed out of a full queue, or older than ``max_age_ns`` behind the
+    newest message seen, is dropped (stale frames are never queued without bound).
+    """
+
+    def __init__(self, slop_ns: int = 0, queue_size: int = 5, max_age_ns: int = 500_000_000):
+        self.slop_ns = int(slop_ns)
+        self.queue_size = max(1, int(queue_size))
+        self.max_age_ns = int(max_age_ns)
+        self.pending: dict[str, dict[int, Any]] = {"left": {}, "right": {}}
+        self.last_paired_ns: int | None = None
+        self.newest_ns: int | None = None
+
+    def add(self, side: str, stamp_ns: int, item: Any) -> SyncEvent:
+        """Offer one message; returns the pairs completed and the messages dropped."""
+        ev = SyncEvent()
+        other = "right" if side == "left" else "left"
+        if self.last_paired_ns is not None and stamp_ns <= self.last_paired_ns:
+            ev.dropped.append((side, stamp_ns, "stale (not newer than the last frame)"))
+            return ev
+        self.newest_ns = stamp_ns if self.newest_ns is None else max(self.newest_ns, stamp_ns)
+        mine, theirs = self.pending[side], self.pending[other]
+        partner: int | None = stamp_ns if stamp_ns in theirs else None
+        if partner is None and self.slop_ns > 0 and theirs:
+            cand = min(theirs, key=lambda s: abs(s - stamp_ns))
+            if abs(cand - stamp_ns) <= self.slop_ns and cand not in mine:
+                partner = cand
+        if partner is not None:
+            other_item = theirs.pop(partner)
+            stamp = stamp_ns if side == "left" else partner   # the left image's stamp
+            left, right = (item, other_item) if side == "left" else (other_item, item)
+            ev.pairs.append((stamp, left, right))
+            self.last_paired_ns = max(stamp_ns, partner)
+            for s in ("left", "right"):                          # older ones are now stale
+                for old in [t for t in self.pending[s] if t <= self.last_paired_ns]:
+                    del self.pending[s][old]
+                    ev.dropped.append((s, old, "no stereo partner (unsynchronised)"))
+            return ev
+        mine[stamp_ns] = item
+        while len(mine) > self.queue_size:
+            old = min(mine)
+            del mine[old]
+            ev.dropped.append((side, old, "no stereo partner before the queue filled"))
+        for s in ("left", "right"):
+            for old in [t for t in self.pending[s] if t < self.newest_ns - self.max_age_ns]:
+                del self.pending[s][old]
+                ev.dropped.append((s, old, "no stereo partner in time (unsynchronised)"))
+        return ev
+
+
+# ---------------------------------------------------------------------- SymbolArray
+
+
+def _array(value: Any, dtype: Any) -> np.ndarray:
+    if isinstance(value, np.ndarray):
+        return value.astype(dtype, copy=False).reshape(-1)
+    try:
+        return np.frombuffer(memoryview(value), dtype=dtype).copy()
+    except (TypeError, ValueError):
+        return np.asarray(list(value), dtype=dtype)
+
+
+def glyphs_from_symbol_array(msg: Any) -> Glyphs:
+    """Glyphs of a tactile_sl_msgs/SymbolArray (rclpy or bag-decoded), checked."""
+    u = _array(msg.u, np.float32)
+    n = len(u)
+    fields = {"v": np.float32, "area": np.float32, "label": np.uint8,
+              "confidence": np.float32, "row": np.int32, "col": np.int32}
+    arrays = {}
+    for name, dtype in fields.items():
+        arr = _array(getattr(msg, name), dtype)
+        if len(arr) not in (n, 0) or (name in ("v", "label") and len(arr) != n):
+            raise PipelineInputError(f"SymbolArray field {name!r} has {len(arr)} values but "
+                                     f"there are {n} glyphs")
+        arrays[name] = arr if len(arr) == n else None
+    ps = int(msg.patch_size)
+    patches = None
+    if ps > 0:
+        raw = _array(msg.patches, np.uint8)
+        if len(raw) == n * ps * ps:
+            patches = raw.reshape(n, ps, ps)
+    return Glyphs(u, arrays["v"], arrays["label"], arrays["confidence"], float(msg.spacing_px),
+                  int(msg.image_width), int(msg.image_height), arrays["area"], patches,
+                  arrays["row"], arrays["col"])
