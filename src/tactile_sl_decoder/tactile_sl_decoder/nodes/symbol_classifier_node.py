@@ -1,0 +1,94 @@
+"""``symbol_classifier``: SymbolArray with patches -> the same SymbolArray, labelled.
+
+Topics (relative): ``symbols`` in, ``labelled_symbols`` out (tactile_sl_msgs/SymbolArray,
+reliable). Each glyph gets the CNN's label and its softmax confidence; below ``threshold``
+the label is 255 (unknown), for the decoder to correct. Parameters in
+config/symbol_classifier.yaml. A message without patches, or with patches of another size
+than the network's 18x18, or with inconsistent arrays, is skipped with a warning.
+"""
+from __future__ import annotations
+
+import time
+
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
+from tactile_sl_decoder.classifier import PATCH, Classifier
+from tactile_sl_decoder.symbol_array import SymbolArrayError, fill_message, from_message
+from tactile_sl_msgs.msg import SymbolArray
+
+
+class SymbolClassifierNode(Node):
+    """Labels incoming glyph patches with the shipped (or a given) LeNet."""
+
+    def __init__(self) -> None:
+        super().__init__("symbol_classifier")
+        self.declare_parameter("weights", "", ParameterDescriptor(
+            description="Weights file from `tactile-sl train`; empty = the shipped ones."))
+        self.declare_parameter("threshold", -1.0, ParameterDescriptor(
+            description="Confidence below which the label is 255; < 0 = the value stored "
+            "with the weights (0.9 for the shipped ones)."))
+        self.declare_parameter("keep_patches", False, ParameterDescriptor(
+            description="Forward the patches (debugging); the decoder does not need them."))
+        weights = str(self.get_parameter("weights").value) or None
+        threshold = float(self.get_parameter("threshold").value)
+        self.classifier = Classifier.load(weights, threshold if threshold >= 0 else None)
+        self.keep_patches = bool(self.get_parameter("keep_patches").value)
+        self.pub = self.create_publisher(SymbolArray, "labelled_symbols", QoSProfile(depth=10))
+        self.sub = self.create_subscription(SymbolArray, "symbols", self.on_symbols,
+                                            QoSProfile(depth=10))
+        self.get_logger().info(f"classifier {self.classifier.meta.get('arch')} with "
+                               f"{self.classifier.classes} classes, threshold "
+                               f"{self.classifier.threshold:.2f}")
+
+    def on_symbols(self, msg: SymbolArray) -> None:
+        """Classify and republish; unusable messages are logged and skipped."""
+        try:
+            sym = from_message(msg)
+        except SymbolArrayError as exc:
+            self.get_logger().warning(f"skipping SymbolArray: {exc}", throttle_duration_sec=5.0)
+            return
+        if len(sym) and sym.patches is None:
+            self.get_logger().warning("skipping SymbolArray without patches (set the "
+                                      "extractor's publish_patches)", throttle_duration_sec=5.0)
+            return
+        if sym.patches is not None and sym.patches.shape[1] != PATCH:
+            self.get_logger().warning(f"skipping SymbolArray with {sym.patches.shape[1]} px "
+                                      f"patches; the network takes {PATCH} px",
+                                      throttle_duration_sec=5.0)
+            return
+        start = time.perf_counter()
+        if len(sym):
+            sym.label, sym.confidence = self.classifier.predict(sym.patches)
+        if not self.keep_patches:
+            sym.patches = None
+        self.pub.publish(fill_message(SymbolArray(), sym, header=msg.header))
+        self.get_logger().debug(f"{len(sym)} glyphs in {1000 * (time.perf_counter() - start):.2f}"
+                                " ms")
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of the ``symbol_classifier`` executable."""
+    rclpy.init(args=args)
+    try:
+        node = SymbolClassifierNode()
+    except Exception as exc:  # bad weights path / file: one clear line, not a traceback
+        print(f"symbol_classifier: {exc}")
+        if rclpy.ok():
+            rclpy.shutdown()
+        raise SystemExit(1) from None
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()
