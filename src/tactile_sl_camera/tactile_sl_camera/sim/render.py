@@ -1,0 +1,451 @@
+"""Ray-casting renderer of the deformed pad, seen by the stereo rig, with ground truth.
+
+Every image sample (``supersample`` x ``supersample`` per pixel, box-filtered down: anti-aliasing)
+is a ray through the distorted pixel position, undistorted exactly (iterative inverse of the
+plumb-bob model) and cached per camera. A ray first meets the undeformed pad plane Z = 0 at
+rest position (X0, Y0). On the deformed pad the material point with rest position (X, Y) sits
+at (X + ux, Y + uy, uz); the ray meets it where X = X0 + uz a - ux, Y = Y0 + uz b - uy (a, b the
+ray's slopes dX/dZ, dY/dZ), solved by fixed-point iteration (a contraction: rays are steep and
+the surface smooth), only for rays near a contact. The hit's rest position indexes the artwork
+(texture mapping in material coordinates, so stretch and shear move the ink with the pad), and
+the hit's position and normal give Lambertian shading from the sensor's light.
+
+Nuisances (blur, noise, vignetting, uneven light, gamma, shadows, occluders, exposure) are
+applied in the physical order: scene radiance, optics (occluders, blur, vignetting), sensor
+(exposure, shot and read noise), then the camera's gamma and 8-bit quantisation.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import cv2
+import numpy as np
+
+from .artwork import Artwork
+from .contact import Contact, FieldGrid, PadParams
+from .optics import Camera, StereoRig
+
+
+@dataclass
+class Nuisances:
+    """Image nuisances; each one a parameter (defaults: a clean, realistic sensor)."""
+
+    blur_sigma: float = 0.5  # optical blur, Gaussian sigma in pixels
+    noise_sigma: float = 0.8  # read noise, grey levels (std)
+    shot_noise: float = 0.02  # shot noise variance per grey level of signal
+    vignetting: float = 0.2  # relative light loss in the image corners
+    light: tuple[float, float, float] = (0.0, -0.006, -0.013)  # point light (pad frame, m)
+    ambient: float = 0.35  # diffuse share of the illumination (fraction)
+    illumination_gradient: tuple[float, float] = (0.0, 0.0)  # relative change per mm in X, Y
+    gamma: float = 1.0  # output = linear ** (1 / gamma)
+    exposure: float = 1.0  # gain on the signal
+    exposure_jitter: float = 0.0  # per-frame relative std of the exposure
+    white_level: float = 0.85  # grey level fraction of white paper at the centre, exposure 1
+    paper: tuple[float, float, float] = (0.93, 0.92, 0.90)  # albedo, B G R
+    ink: tuple[float, float, float] = (0.10, 0.09, 0.08)
+    shadows: list[dict[str, float]] = field(default_factory=list)  # pad-space soft shadows
+    occluders: list[dict[str, Any]] = field(default_factory=list)  # image-space dust/occluders
+
+    @classmethod
+    def from_dict(cls, doc: dict[str, Any] | None) -> "Nuisances":
+        """Nuisances from a YAML mapping; unknown keys are an error naming the known ones."""
+        doc = dict(doc or {})
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(doc) - known)
+        if unknown:
+            raise ValueError(f"unknown nuisance parameter(s): {', '.join(unknown)} "
+                             f"(known: {', '.join(sorted(known))})")
+        for key in ("light", "illumination_gradient", "paper", "ink"):
+            if key in doc:
+                doc[key] = tuple(float(v) for v in doc[key])
+        for key in ("shadows", "occluders"):
+            if key in doc and not isinstance(doc[key], list):
+                raise ValueError(f"{key} must be a list of mappings")
+        out = cls(**doc)
+        if out.gamma <= 0 or out.exposure < 0 or out.blur_sigma < 0 or out.noise_sigma < 0:
+            raise ValueError("gamma must be > 0; exposure, blur_sigma and noise_sigma >= 0")
+        return out
+
+
+@dataclass
+class GroundTruth:
+    """Every cell of the pattern: 3-D centre (left optical frame), projections, visibility."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    xyz: np.ndarray  # (N, 3) metres, physical left camera optical frame
+    world: np.ndarray  # (N, 3) pad frame
+    px_left: np.ndarray  # (N, 2) exact distorted pixel positions
+    px_right: np.ndarray
+    visible: np.ndarray  # (N,) bool: visible in both images
+
+    def visible_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(xyz, rows, cols) of the glyphs visible in both images."""
+        v = self.visible
+        return self.xyz[v], self.rows[v], self.cols[v]
+
+
+@dataclass
+class StereoFrame:
+    """One rendered stereo frame."""
+
+    left: np.ndarray
+    right: np.ndarray
+    truth: GroundTruth
+    field: FieldGrid
+
+
+class _RayTable:
+    """Cached per-camera rays, at pixel centres (casting) and at supersamples (texture)."""
+
+    def __init__(self, cam: Camera, ss: int) -> None:
+        self.ss = ss
+        self.shape = (cam.height, cam.width)
+        self.shape_ss = (cam.height * ss, cam.width * ss)
+        # pixel centres
+        ys, xs = np.mgrid[0:cam.height, 0:cam.width].astype(np.float64)
+        d = cam.rays(np.stack([xs, ys], axis=-1).reshape(-1, 2))
+        self.a = d[:, 0].reshape(self.shape).astype(np.float32)
+        self.b = d[:, 1].reshape(self.shape).astype(np.float32)
+        self.X0 = (cam.C[0] - cam.C[2] * d[:, 0]).reshape(self.shape).astype(np.float32)
+        self.Y0 = (cam.C[1] - cam.C[2] * d[:, 1]).reshape(self.shape).astype(np.float32)
+        # supersamples at (i + 0.5) / ss - 0.5 pixel units (cv2.resize's alignment): rays
+        # interpolated bilinearly between exactly undistorted rays on a grid one pixel wider
+        # than the image (the undistortion map is smooth: error < 1e-4 px).
+        if ss == 1:
+            self.a_ss, self.b_ss, self.X0_ss, self.Y0_ss = self.a, self.b, self.X0, self.Y0
+            return
+        ys, xs = np.mgrid[-1:cam.height + 1, -1:cam.width + 1].astype(np.float64)
+        d = cam.rays(np.stack([xs, ys], axis=-1).reshape(-1, 2))
+        ext = (cam.height + 2, cam.width + 2)
+        da, db = d[:, 0].reshape(ext), d[:, 1].reshape(ext)
+        a_ss = np.empty(self.shape_ss)
+        b_ss = np.empty(self.shape_ss)
+        h, w = self.shape
+        for k in range(ss):
+            fy = (k + 0.5) / ss - 0.5  # offset from the pixel centre, in pixels
+            iy, ty = (0, 1 + fy) if fy < 0 else (1, fy)
+            for m in range(ss):
+                fx = (m + 0.5) / ss - 0.5
+                ix, tx = (0, 1 + fx) if fx < 0 else (1, fx)
+                for src, dst in ((da, a_ss), (db, b_ss)):
+                    dst[k::ss, m::ss] = (
+                        (1 - ty) * ((1 - tx) * src[iy:iy + h, ix:ix + w]
+                                    + tx * src[iy:iy + h, ix + 1:ix + 1 + w])
+                        + ty * ((1 - tx) * src[iy + 1:iy + 1 + h, ix:ix + w]
+                                + tx * src[iy + 1:iy + 1 + h, ix + 1:ix + 1 + w]))
+        self.a_ss = a_ss.astype(np.float32)
+        self.b_ss = b_ss.astype(np.float32)
+        self.X0_ss = (cam.C[0] - cam.C[2] * a_ss).astype(np.float32)
+        self.Y0_ss = (cam.C[1] - cam.C[2] * b_ss).astype(np.float32)
+
+
+class Renderer:
+    """Render stereo frames of the pad under contacts; deterministic for a seed."""
+
+    def __init__(self, artwork: Artwork, rig: StereoRig | None = None,
+                 pad: PadParams | None = None, supersample: int = 2, iterations: int = 8,
+                 mirrored: bool = False, grid: dict[str, float] | None = None) -> None:
+        self.artwork = artwork
+        self.rig = rig or StereoRig()
+        self.pad = pad or PadParams()
+        self.ss = int(supersample)
+        if self.ss < 1:
+            raise ValueError("supersample must be >= 1")
+        self.iterations = int(iterations)
+        self.mirrored = bool(mirrored)
+        self.grid = grid or {}
+        self.pitch = artwork.pitch_m
+        self._tables = [_RayTable(c, self.ss) for c in self.rig.cameras]
+        self._texture = np.ascontiguousarray(artwork.albedo, dtype=np.float32)
+        # rest position -> cell coordinates -> texture pixel (affine, separable)
+        self.uc = (artwork.cols - 1) / 2.0
+        self.vc = (artwork.rows - 1) / 2.0
+        sx = -1.0 if self.mirrored else 1.0
+        p00 = artwork.cell_to_pixel(np.array(self.vc), np.array(self.uc))
+        p10 = artwork.cell_to_pixel(np.array(self.vc), np.array(self.uc + 1.0))
+        self._tex_ax = float(p10[0] - p00[0]) * sx / self.pitch
+        self._tex_bx = float(p00[0])
+        self._tex_ay = float(artwork.pitch_px) / self.pitch
+        self._tex_by = float(p00[1])
+        self._tex_flat = [(t.X0_ss * self._tex_ax + self._tex_bx,
+                           t.Y0_ss * self._tex_ay + self._tex_by) for t in self._tables]
+        self._cache: dict[Any, np.ndarray] = {}
+
+    # ------------------------------------------------------------------ geometry
+
+    def cell_rest_positions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, cols, X, Y) of every cell centre on the undeformed pad (pad frame)."""
+        rows, cols = np.meshgrid(np.arange(self.artwork.rows), np.arange(self.artwork.cols),
+                                 indexing="ij")
+        rows, cols = rows.reshape(-1), cols.reshape(-1)
+        sx = -1.0 if self.mirrored else 1.0
+        X = sx * (cols - self.uc) * self.pitch
+        Y = (rows - self.vc) * self.pitch
+        return rows, cols, X, Y
+
+    def build_field(self, contacts: list[Contact]) -> FieldGrid:
+        return FieldGrid.build(contacts, self.pad, **self.grid)
+
+    def _cast(self, table: _RayTable, fld: FieldGrid
+              ) -> tuple[np.ndarray, np.ndarray, tuple[slice, slice] | None]:
+        """Rest positions hit by the pixel-centre rays, and the image window that moved."""
+        X = table.X0.copy()
+        Y = table.Y0.copy()
+        if fld.active_box is None:
+            return X, Y, None
+        margin = fld.max_displacement() * 1.5 + 1e-4
+        bx0, by0, bx1, by1 = fld.active_box
+        mask = ((table.X0 > bx0 - margin) & (table.X0 < bx1 + margin)
+                & (table.Y0 > by0 - margin) & (table.Y0 < by1 + margin))
+        rows = np.flatnonzero(mask.any(axis=1))
+        cols = np.flatnonzero(mask.any(axis=0))
+        if rows.size == 0:
+            return X, Y, None
+        win = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+        x0, y0, a, b = table.X0[win], table.Y0[win], table.a[win], table.b[win]
+        inv = np.float32(1.0 / fld.spacing)
+        ox, oy = np.float32(fld.x0 / fld.spacing), np.float32(fld.y0 / fld.spacing)
+        table5 = fld.table32
+        xs, ys = x0, y0
+        tol = 5e-7  # metres (0.02 px; cv2.remap interpolates in 1/32 grid steps)
+        self.last_iterations = 0
+        for _ in range(self.iterations):
+            u = cv2.remap(table5, xs * inv - ox, ys * inv - oy, cv2.INTER_LINEAR,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            # Newton step on X - G(X) = 0 with G(X) = X0 + uz(X) (a, b) - (ux, uy)(X); the
+            # Jacobian keeps the rank-one height term (the lateral terms are small).
+            rx = x0 + u[:, :, 2] * a - u[:, :, 0] - xs
+            ry = y0 + u[:, :, 2] * b - u[:, :, 1] - ys
+            gx, gy = u[:, :, 3], u[:, :, 4]
+            k = (gx * rx + gy * ry) / np.maximum(1.0 - gx * a - gy * b, np.float32(0.2))
+            xs = xs + rx + a * k
+            ys = ys + ry + b * k
+            self.last_iterations += 1
+            if max(float(np.abs(rx).max()), float(np.abs(ry).max())) < tol:
+                break
+        X[win] = xs
+        Y[win] = ys
+        return X, Y, win
+
+    # ------------------------------------------------------------------ shading
+
+    def _irradiance(self, P: np.ndarray, n: np.ndarray, nz: Nuisances) -> np.ndarray:
+        """Lambertian irradiance from the point light plus ambient, 1 at the pad centre.
+
+        P, n: (..., 3) positions (pad frame) and unit normals pointing at the cameras.
+        """
+        L = np.asarray(nz.light, dtype=np.float32)
+        lx, ly, lz = L[0] - P[..., 0], L[1] - P[..., 1], L[2] - P[..., 2]
+        dist2 = lx * lx + ly * ly + lz * lz
+        cos = (lx * n[..., 0] + ly * n[..., 1] + lz * n[..., 2]) / np.sqrt(dist2)
+        direct = np.maximum(cos, 0.0) / dist2
+        ref = abs(L[2]) / float(L @ L) ** 1.5  # flat pad, centre
+        E = nz.ambient + (1.0 - nz.ambient) * direct / ref
+        gx, gy = nz.illumination_gradient
+        if gx or gy:
+            E = E * np.maximum(0.0, 1.0 + gx * P[..., 0] * 1e3 + gy * P[..., 1] * 1e3)
+        return E.astype(np.float32)
+
+    def _shadow_factor(self, X: np.ndarray, Y: np.ndarray, nz: Nuisances) -> np.ndarray | float:
+        if not nz.shadows:
+            return 1.0
+        f = np.ones(np.shape(X), np.float32)
+        for s in nz.shadows:
+            cx, cy = float(s.get("x", 0.0)), float(s.get("y", 0.0))
+            r = float(s.get("radius", 0.002))
+            soft = max(float(s.get("softness", 0.0005)), 1e-6)
+            strength = float(s.get("strength", 0.5))
+            d = np.hypot(X - cx, Y - cy)
+            t = np.clip((r - d) / soft + 0.5, 0.0, 1.0)
+            f *= 1.0 - strength * (t * t * (3 - 2 * t))
+        return f
+
+    def _vignette(self, cam: Camera, strength: float) -> np.ndarray:
+        key = ("vignette", cam.name, strength)
+        if key not in self._cache:
+            ys, xs = np.mgrid[0:cam.height, 0:cam.width].astype(np.float32)
+            r2 = ((xs - cam.K[0, 2]) ** 2 + (ys - cam.K[1, 2]) ** 2) / (
+                (cam.width / 2) ** 2 + (cam.height / 2) ** 2)
+            self._cache[key] = (1.0 - strength * r2).astype(np.float32)
+        return self._cache[key]
+
+    def _flat_irradiance(self, index: int, nz: Nuisances) -> np.ndarray:
+        key = ("flat", index, nz.light, nz.ambient, nz.illumination_gradient)
+        if key not in self._cache:
+            t = self._tables[index]
+            P = np.stack([t.X0, t.Y0, np.zeros_like(t.X0)], axis=-1)
+            n = np.zeros_like(P)
+            n[..., 2] = -1.0
+            self._cache[key] = self._irradiance(P, n, nz)
+        return self._cache[key]
+
+    def render_camera(self, index: int, fld: FieldGrid, nz: Nuisances, rng: np.random.Generator,
+                      exposure: float, color: bool) -> np.ndarray:
+        """One camera's image (uint8, grey or BGR)."""
+        cam = self.rig.cameras[index]
+        table = self._tables[index]
+        h, w = cam.height, cam.width
+        X, Y, win = self._cast(table, fld)
+        tex_x, tex_y = self._tex_flat[index]
+        E = self._flat_irradiance(index, nz)
+        if win is not None:
+            # Supersample positions: exact flat-plane hits plus the (smooth) deformation
+            # correction cast at pixel centres, interpolated.
+            dX = X - table.X0
+            dY = Y - table.Y0
+            if self.ss > 1:
+                dX = cv2.resize(dX, (w * self.ss, h * self.ss), interpolation=cv2.INTER_LINEAR)
+                dY = cv2.resize(dY, (w * self.ss, h * self.ss), interpolation=cv2.INTER_LINEAR)
+            tex_x = tex_x + dX * np.float32(self._tex_ax)
+            tex_y = tex_y + dY * np.float32(self._tex_ay)
+            xs, ys = X[win], Y[win]
+            inv = np.float32(1.0 / fld.spacing)
+            mx = xs * inv - np.float32(fld.x0 / fld.spacing)
+            my = ys * inv - np.float32(fld.y0 / fld.spacing)
+            u = cv2.remap(fld.table32, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                          borderValue=0)
+            g = u[..., 3:5]
+            P = np.stack([xs + u[..., 0], ys + u[..., 1], u[..., 2]], axis=-1)
+            n = np.stack([g[..., 0], g[..., 1], -np.ones_like(g[..., 0])], axis=-1)
+            n /= np.sqrt((n * n).sum(axis=-1, keepdims=True))
+            E = E.copy()
+            E[win] = self._irradiance(P, n, nz)
+        albedo = cv2.remap(self._texture, tex_x, tex_y, cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_CONSTANT, borderValue=1.0)
+        if self.ss > 1:
+            albedo = cv2.resize(albedo, (w, h), interpolation=cv2.INTER_AREA)
+        E = E * self._shadow_factor(X, Y, nz)
+        channels = 3 if color else 1
+        out = np.empty((h, w, channels), np.float32)
+        for c in range(channels):
+            ink = nz.ink[c] if color else float(np.mean(nz.ink))
+            paper = nz.paper[c] if color else float(np.mean(nz.paper))
+            out[:, :, c] = (ink + (paper - ink) * albedo) * E
+        for occ in nz.occluders:
+            if occ.get("camera", "both") not in ("both", cam.name):
+                continue
+            mask = np.zeros((h, w), np.float32)
+            cv2.circle(mask, (int(occ.get("u", w / 2)), int(occ.get("v", h / 2))),
+                       int(occ.get("radius", 20)), 1.0, -1, lineType=cv2.LINE_AA)
+            soft = float(occ.get("softness", 6.0))
+            mask = cv2.GaussianBlur(mask, (0, 0), soft) if soft > 0 else mask
+            out *= (1.0 - float(occ.get("strength", 0.6)) * mask)[:, :, None]
+        if nz.blur_sigma > 0:
+            out = cv2.GaussianBlur(out, (0, 0), nz.blur_sigma).reshape(h, w, channels)
+        if nz.vignetting:
+            out *= self._vignette(cam, nz.vignetting)[:, :, None]
+        signal = out * np.float32(255.0 * nz.white_level / float(np.mean(nz.paper)) * exposure)
+        if nz.shot_noise > 0 or nz.noise_sigma > 0:
+            std = np.sqrt(np.float32(nz.noise_sigma**2)
+                          + np.float32(nz.shot_noise) * np.maximum(signal, 0.0))
+            signal = signal + std * rng.standard_normal(signal.shape, dtype=np.float32)
+        linear = np.clip(signal * np.float32(1 / 255.0), 0.0, 1.0)
+        if nz.gamma != 1.0:
+            linear = linear ** np.float32(1.0 / nz.gamma)
+        img = np.rint(linear * np.float32(255.0)).astype(np.uint8)
+        return img[:, :, 0] if channels == 1 else img
+
+    # ------------------------------------------------------------------ ground truth
+
+    def hit_rest_position(self, cam: Camera, px: np.ndarray, fld: FieldGrid,
+                          iterations: int = 40) -> np.ndarray:
+        """Rest positions hit by rays through pixels (float64, exact field): occlusion test."""
+        d = cam.rays(px)
+        x0 = cam.C[0] - cam.C[2] * d[:, 0]
+        y0 = cam.C[1] - cam.C[2] * d[:, 1]
+        xs, ys = x0.copy(), y0.copy()
+        if fld.active_box is not None:
+            for _ in range(iterations):
+                u = fld.sample(xs, ys)
+                nx = x0 + u[:, 2] * d[:, 0] - u[:, 0]
+                ny = y0 + u[:, 2] * d[:, 1] - u[:, 1]
+                change = float(np.abs(np.concatenate([nx - xs, ny - ys])).max(initial=0.0))
+                xs, ys = nx, ny
+                if change < 1e-12:
+                    break
+        return np.stack([xs, ys], axis=1)
+
+    def ground_truth(self, fld: FieldGrid, nz: Nuisances | None = None,
+                     margin_px: float | None = None) -> GroundTruth:
+        """True cell centres on the deformed pad and their visibility in both images."""
+        rows, cols, X, Y = self.cell_rest_positions()
+        u = fld.sample(X, Y)
+        world = np.stack([X + u[:, 0], Y + u[:, 1], u[:, 2]], axis=1)
+        if margin_px is None:
+            margin_px = 0.5 * self.pitch * self.rig.pixels_per_metre_at_pad()
+        visible = np.ones(len(rows), bool)
+        pxs = []
+        for cam in self.rig.cameras:
+            in_front = cam.to_camera(world)[:, 2] > 1e-4
+            px = cam.project(world)
+            inside = ((px[:, 0] >= margin_px) & (px[:, 0] <= cam.width - 1 - margin_px)
+                      & (px[:, 1] >= margin_px) & (px[:, 1] <= cam.height - 1 - margin_px))
+            ok = in_front & inside
+            if ok.any() and fld.active_box is not None:
+                hit = self.hit_rest_position(cam, px[ok], fld)
+                err = np.hypot(hit[:, 0] - X[ok], hit[:, 1] - Y[ok])
+                sub = np.flatnonzero(ok)
+                ok[sub[err > 0.02 * self.pitch]] = False  # another part of the pad is in front
+            if nz is not None and nz.shadows:
+                ok &= np.asarray(self._shadow_factor(X, Y, nz)) > 0.3
+            if nz is not None:
+                for occ in nz.occluders:
+                    if occ.get("camera", "both") in ("both", cam.name) and \
+                            float(occ.get("strength", 0.6)) > 0.7:
+                        dist = np.hypot(px[:, 0] - float(occ.get("u", cam.width / 2)),
+                                        px[:, 1] - float(occ.get("v", cam.height / 2)))
+                        ok &= dist > float(occ.get("radius", 20))
+            visible &= ok
+            pxs.append(px)
+        xyz = self.rig.world_to_left(world)
+        return GroundTruth(rows, cols, xyz, world, pxs[0], pxs[1], visible)
+
+    # ------------------------------------------------------------------ frames
+
+    def render(self, contacts: list[Contact], nuisances: Nuisances | None = None,
+               seed: int = 0, frame_index: int = 0, color: bool = False) -> StereoFrame:
+        """Render one stereo frame and its ground truth (deterministic for seed, frame)."""
+        nz = nuisances or Nuisances()
+        fld = self.build_field(contacts)
+        rng = np.random.default_rng([int(seed), int(frame_index)])
+        exposure = nz.exposure * (1.0 + nz.exposure_jitter * float(rng.standard_normal())) \
+            if nz.exposure_jitter else nz.exposure
+        exposure = max(exposure, 0.0)
+        left = self.render_camera(0, fld, nz, rng, exposure, color)
+        right = self.render_camera(1, fld, nz, rng, exposure, color)
+        return StereoFrame(left, right, self.ground_truth(fld, nz), fld)
+
+    def render_plane(self, index: int, R_board: np.ndarray, t_board: np.ndarray,
+                     albedo_fn: Any, background: float = 0.45, noise_sigma: float = 0.5,
+                     blur_sigma: float = 0.4, rng: np.random.Generator | None = None
+                     ) -> np.ndarray:
+        """Image of a rigid planar target (calibration board) in the pad frame.
+
+        The board's point (u, v) is at ``t_board + R_board @ (u, v, 0)``; ``albedo_fn(u, v)``
+        gives its albedo. Same cached rays and anti-aliasing as the pad.
+        """
+        cam = self.rig.cameras[index]
+        table = self._tables[index]
+        n = R_board[:, 2]
+        a = table.a_ss.reshape(-1).astype(np.float64)
+        b = table.b_ss.reshape(-1).astype(np.float64)
+        d = np.stack([a, b, np.ones_like(a)], axis=1)
+        denom = d @ n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = ((t_board - cam.C) @ n) / denom
+        P = cam.C[None, :] + s[:, None] * d - t_board[None, :]
+        uv = P @ R_board[:, :2]
+        albedo = albedo_fn(uv[:, 0], uv[:, 1])
+        albedo = np.where((s > 0) & np.isfinite(s), albedo, background).astype(np.float32)
+        img = cv2.resize(albedo.reshape(table.shape_ss), (cam.width, cam.height),
+                         interpolation=cv2.INTER_AREA) if self.ss > 1 else \
+            albedo.reshape(table.shape_ss)
+        if blur_sigma > 0:
+            img = cv2.GaussianBlur(img, (0, 0), blur_sigma)
+        img = img * 230.0
+        if noise_sigma > 0:
+            rng = rng or np.random.default_rng(0)
+            img = img + noise_sigma * rng.standard_normal(img.shape)
+        return np.clip(np.rint(img), 0, 255).astype(np.uint8)

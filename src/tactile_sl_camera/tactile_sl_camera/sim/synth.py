@@ -1,0 +1,156 @@
+"""Turn scenes into messages and MCAP bags: images, camera_info and ground truth per frame.
+
+Shared by ``tactile-sl synth`` (bags) and the ``sim_camera`` node (live topics), so both
+publish exactly the same thing for the same scene.
+"""
+from __future__ import annotations
+
+import os
+import pathlib
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator
+
+import numpy as np
+
+from ..camera_info import camera_info_fields
+from ..clouds import cloud_fields, pack_points
+from ..images import image_fields
+from .artwork import load_artwork
+from .contact import Contact
+from .optics import StereoRig
+from .render import Nuisances, Renderer, StereoFrame
+from .scenes import Scene
+
+LEFT_FRAME = "tactile_left_optical_frame"
+RIGHT_FRAME = "tactile_right_optical_frame"
+IMAGE = "sensor_msgs/msg/Image"
+INFO = "sensor_msgs/msg/CameraInfo"
+CLOUD = "sensor_msgs/msg/PointCloud2"
+
+
+@dataclass
+class FrameIds:
+    """Frame ids of the two optical frames (the cloud uses the left one, per contract)."""
+
+    left: str = LEFT_FRAME
+    right: str = RIGHT_FRAME
+
+
+class RendererCache:
+    """Renderers keyed by their optics/artwork, so scenes sharing a rig share ray tables."""
+
+    def __init__(self, artwork: str | os.PathLike | None = None) -> None:
+        self.artwork = artwork
+        self._renderers: dict[Any, Renderer] = {}
+
+    def get(self, scene: Scene) -> Renderer:
+        key = scene.renderer_key() + (str(self.artwork),)
+        if key not in self._renderers:
+            art = load_artwork(scene.artwork or self.artwork)
+            self._renderers[key] = Renderer(art, StereoRig(scene.rig), scene.pad,
+                                            supersample=scene.supersample,
+                                            mirrored=scene.mirrored)
+        return self._renderers[key]
+
+
+def render_scene_frame(scene: Scene, renderer: Renderer, frame: int) -> StereoFrame:
+    """Render frame ``frame`` of a scene (deterministic for the scene's seed)."""
+    return renderer.render(scene.contacts_at(frame), scene.nuisances_at(frame), seed=scene.seed,
+                           frame_index=frame, color=scene.encoding == "bgr8")
+
+
+def frame_messages(scene: Scene, renderer: Renderer, frame: StereoFrame, stamp_ns: int,
+                   ids: FrameIds | None = None) -> list[tuple[str, str, dict[str, Any]]]:
+    """(relative topic, type, fields) of one stereo frame, all with the same stamp."""
+    ids = ids or FrameIds()
+    stamp = (int(stamp_ns // 1_000_000_000), int(stamp_ns % 1_000_000_000))
+    header_l = {"stamp": {"sec": stamp[0], "nanosec": stamp[1]}, "frame_id": ids.left}
+    header_r = {"stamp": {"sec": stamp[0], "nanosec": stamp[1]}, "frame_id": ids.right}
+    xyz, rows, cols = frame.truth.visible_points()
+    rig = renderer.rig
+    return [
+        ("left/image_raw", IMAGE, {"header": header_l, **image_fields(frame.left, scene.encoding)}),
+        ("right/image_raw", IMAGE,
+         {"header": header_r, **image_fields(frame.right, scene.encoding)}),
+        ("left/camera_info", INFO, camera_info_fields(rig.left_info, stamp, ids.left)),
+        ("right/camera_info", INFO, camera_info_fields(rig.right_info, stamp, ids.right)),
+        ("ground_truth/points", CLOUD,
+         cloud_fields(pack_points(xyz, rows, cols), stamp, ids.left)),
+    ]
+
+
+def iter_scene(scene: Scene, renderer: Renderer, ids: FrameIds | None = None
+               ) -> Iterator[tuple[int, int, list[tuple[str, str, dict[str, Any]]]]]:
+    """(frame index, stamp ns, messages) for every frame of a scene."""
+    for i in range(scene.frames):
+        frame = render_scene_frame(scene, renderer, i)
+        stamp = scene.stamp_ns(i)
+        yield i, stamp, frame_messages(scene, renderer, frame, stamp, ids)
+
+
+class Progress:
+    """A small progress bar on stderr (a line per update when stderr is not a terminal)."""
+
+    def __init__(self, total: int, stream: Any = None, width: int = 30) -> None:
+        self.total = max(1, total)
+        self.done = 0
+        self.stream = stream or sys.stderr
+        self.width = width
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.start = time.monotonic()
+
+    def update(self, n: int = 1, label: str = "") -> None:
+        self.done += n
+        frac = self.done / self.total
+        filled = int(round(frac * self.width))
+        rate = self.done / max(time.monotonic() - self.start, 1e-9)
+        line = (f"[{'#' * filled}{'.' * (self.width - filled)}] {self.done}/{self.total} "
+                f"frames {rate:.1f}/s {label}")
+        if self.tty:
+            self.stream.write("\r" + line.ljust(78))
+            if self.done >= self.total:
+                self.stream.write("\n")
+        else:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+
+def write_scene_bag(scene: Scene, renderer: Renderer, path: str | os.PathLike,
+                    namespace: str = "/tactile", ids: FrameIds | None = None,
+                    on_frame: Callable[[int], None] | None = None) -> pathlib.Path:
+    """Write a scene as a rosbag2-compatible MCAP bag; log time = stamp."""
+    from ..bag_io import BagWriter
+
+    p = pathlib.Path(path)
+    tmp = p.with_name(p.name + ".partial")
+    ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
+    with BagWriter(tmp) as bag:
+        for i, stamp, messages in iter_scene(scene, renderer, ids):
+            for topic, schema, fields in messages:
+                bag.write(f"{ns}/{topic}", schema, fields, stamp)
+            if on_frame:
+                on_frame(i)
+    os.replace(tmp, p)
+    return p
+
+
+def benchmark(renderer: Renderer, frames: int = 20, contacts: list[Contact] | None = None,
+              nuisances: Nuisances | None = None) -> float:
+    """Stereo frames per second (rendering plus ground truth) for a contact scene."""
+    if contacts is None:
+        contacts = [Contact("sphere", radius=0.004, x=0.0005, y=-0.0003, depth=0.0006)]
+    renderer.render(contacts, nuisances, seed=0, frame_index=0)  # warm caches
+    start = time.perf_counter()
+    for i in range(frames):
+        moved = [Contact(c.kind, c.radius, c.length, c.angle, c.fillet, c.x + 1e-5 * i, c.y,
+                         c.depth, c.shear) for c in contacts]
+        renderer.render(moved, nuisances, seed=0, frame_index=i)
+    return frames / (time.perf_counter() - start)
+
+
+def stats(frame: StereoFrame) -> dict[str, float]:
+    """A few numbers about a frame (for logs)."""
+    return {"visible": int(frame.truth.visible.sum()),
+            "max_indent_mm": float(-np.min(frame.field.data[:, :, 2], initial=0.0) * 1e3)}

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Regenerate the bundled bags (bags/*.mcap) from bags/scenes.yaml and the artwork the project
+# ships. Deterministic: the same inputs give the same bytes. Run through `make bags`
+# (`source env.sh && bash tools/make_bags.sh`).
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+ART="$ROOT/src/tactile_sl_camera/artwork/pattern.png"
+if [ ! -f "$ART" ] || [ ! -f "$ART.yaml" ]; then
+  echo "make_bags: $ART (and its .yaml sidecar) missing; render it with" \
+       "'tactile-sl pattern render PATTERN.yaml --png $ART'" >&2
+  exit 1
+fi
+tactile-sl synth "$ROOT/bags/scenes.yaml" -o "$ROOT/bags" --artwork "$ART"
+for bag in "$ROOT"/bags/*.mcap; do
+  size=$(stat -c %s "$bag")
+  if [ "$size" -ge 5000000 ]; then
+    echo "make_bags: $bag is $size bytes (limit 5 MB)" >&2
+    exit 1
+  fi
+done
