@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     data_seconds = time.monotonic() - start
     result = train(train_set, val_set, len(DEFAULT_PRIMITIVES), list(DEFAULT_PRIMITIVES),
                    epochs=args.epochs, seed=args.seed, threshold=args.threshold,
-                   meta={"seed": args.seed, "torch": torch.__version__,
+                   meta={"seed": args.seed, "torch": str(torch.__version__),
                          "frames": args.frames, "val_frames": args.val_frames})
     save_blob(result.blob, out)
     note = (f"Simulator frames (`tactile_sl_camera.sim`, shipped artwork), both cameras: "

@@ -1,0 +1,133 @@
+"""`tactile-sl evaluate BAG.mcap ...`: extraction and classification figures vs ground truth.
+
+The report is a list of sections, each a function of (args, bags) returning text; the
+symbol sections live here, later stages append theirs to ``SECTIONS``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``evaluate`` subcommand."""
+    p = subparsers.add_parser(
+        "evaluate", help="per scene and frame: extraction recall/spurious rate, "
+        "classification accuracy and confusion matrix against a bag's ground truth",
+        description="Runs glyph extraction and classification on every frame of bags that "
+        "carry /tactile/ground_truth/points and compares with the ground truth projected "
+        "into both images (see docs/extraction.md for the definitions).")
+    p.add_argument("bags", nargs="+", type=Path, help="MCAP bags with ground truth")
+    p.add_argument("--pattern", type=Path, default=None,
+                   help="pattern YAML giving the true symbol of each cell (default: shipped)")
+    p.add_argument("--weights", type=Path, default=None,
+                   help="classifier weights (default: shipped)")
+    p.add_argument("--namespace", default="/tactile", help="topic namespace in the bags")
+    p.add_argument("--max-frames", type=int, default=0, help="frames per bag (0 = all)")
+    p.add_argument("--totals-only", action="store_true",
+                   help="print one row per scene instead of one per image")
+    p.add_argument("--json", type=Path, default=None, help="also write every figure as JSON")
+    p.set_defaults(func=run)
+
+
+def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
+    """(values array, primitive names, where they came from) for labelling the truth."""
+    from tactile_sl_decoder.pattern import load_default_pattern, load_pattern
+
+    try:
+        pat = load_pattern(path) if path is not None else load_default_pattern()
+        return pat.array, list(pat.primitives), str(path or "shipped pattern")
+    except (ValueError, OSError) as exc:
+        if path is not None:
+            raise
+        # the shipped pattern must match the shipped artwork; read the values from it
+        from tactile_sl_camera.sim import load_artwork
+        from tactile_sl_decoder.training import DEFAULT_PRIMITIVES, artwork_values
+
+        print(f"evaluate: warning: shipped pattern unreadable ({exc}); reading cell values "
+              "from the simulator artwork instead", file=sys.stderr)
+        return (artwork_values(load_artwork(), DEFAULT_PRIMITIVES), list(DEFAULT_PRIMITIVES),
+                "simulator artwork")
+
+
+def symbol_sections(args: argparse.Namespace, bags: list[Path]) -> str:
+    """Extraction, classification and confusion tables of every bag, plus JSON."""
+    from tactile_sl_camera.bag_io import BagError
+    from tactile_sl_decoder.classifier import Classifier
+    from tactile_sl_decoder.evaluation import (
+        aggregate,
+        classification_section,
+        confusion_section,
+        evaluate_symbols_bag,
+        extraction_section,
+        format_confusion,
+        format_table,
+        to_json,
+    )
+
+    try:
+        values, names, source = pattern_values(args.pattern)
+        clf = Classifier.load(args.weights)
+    except (ValueError, OSError) as exc:  # pattern, artwork and weights errors say which file
+        raise SystemExit(f"evaluate: {exc}") from None
+    all_rows, totals, out = [], [], []
+    for bag in bags:
+        def bar(done: int, total: int, name: str = bag.name) -> None:
+            sys.stderr.write(f"\r{name}: frame {done}/{total}   ")
+            sys.stderr.flush()
+        try:
+            rows = evaluate_symbols_bag(bag, values, clf, namespace=args.namespace,
+                                        progress=bar, max_frames=args.max_frames)
+        except BagError as exc:
+            sys.stderr.write("\n")
+            raise SystemExit(f"evaluate: {exc}") from None
+        sys.stderr.write("\n")
+        if not rows:
+            out.append(f"{bag.name}: no frame with ground truth\n")
+            continue
+        all_rows += rows
+        totals.append(aggregate(rows))
+    shown = totals if args.totals_only else [r for bag_rows in _by_scene(all_rows, totals)
+                                             for r in bag_rows]
+    out.append(f"true labels from {source}; classifier threshold {clf.threshold:.2f}\n")
+    out.append(format_table(extraction_section(shown), "== extraction =="))
+    out.append(format_table(classification_section(shown), "== classification =="))
+    if totals:
+        overall = aggregate(all_rows, "all scenes")
+        out.append(format_table(extraction_section(totals + [overall]),
+                                "== extraction, per scene =="))
+        out.append(format_table(classification_section(totals + [overall]),
+                                "== classification, per scene =="))
+        for t in totals + [overall]:
+            out.append(format_confusion(confusion_section(t, names)))
+    if args.json:
+        args.json.write_text(json.dumps({"images": to_json(all_rows),
+                                         "scenes": to_json(totals)}, indent=1))
+    return "\n".join(out)
+
+
+def _by_scene(rows: list[Any], totals: list[Any]) -> list[list[Any]]:
+    out = []
+    for t in totals:
+        out.append([r for r in rows if r.scene == t.scene] + [t])
+    return out
+
+
+SECTIONS: list[Callable[[argparse.Namespace, list[Path]], str]] = [symbol_sections]
+"""Report sections, printed in order."""
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print every section; returns the exit status."""
+    missing = [str(b) for b in args.bags if not b.is_file()]
+    if missing:
+        print(f"evaluate: no such bag: {', '.join(missing)}", file=sys.stderr)
+        return 2
+    for section in SECTIONS:
+        print(section(args, list(args.bags)))
+    return 0
