@@ -1,0 +1,235 @@
+"""Stereo checkerboard calibration (Zhang's method through OpenCV) into ROS camera_info files.
+
+Pipeline: find the inner corners of a checkerboard in every image pair (refined to sub-pixel),
+calibrate each camera (K, plumb-bob D with k3 fixed at 0 by default, like ROS's
+camera_calibration), refine both jointly with the extrinsics (``cv2.stereoCalibrate``), then
+rectify (``cv2.stereoRectify``, zero disparity at infinity) to get the R and P that the ROS
+stereo convention publishes. Inputs are image pairs from a folder or from a bag.
+"""
+from __future__ import annotations
+
+import os
+import pathlib
+from dataclasses import dataclass
+from typing import Callable, Iterable, Iterator
+
+import cv2
+import numpy as np
+
+from .camera_info import CameraCalibration, save_camera_info_yaml
+
+SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
+
+
+class CalibrationError(RuntimeError):
+    """Calibration that cannot be done with the given data; the message says why."""
+
+
+@dataclass
+class StereoCalibrationResult:
+    """Estimated calibration with its quality figures."""
+
+    left: CameraCalibration
+    right: CameraCalibration
+    R: np.ndarray  # left -> right rotation
+    T: np.ndarray  # left -> right translation (metres)
+    rms_stereo: float  # joint reprojection RMS (px)
+    rms_left: float
+    rms_right: float
+    pairs_used: int
+    pairs_total: int
+
+    @property
+    def baseline(self) -> float:
+        return float(np.linalg.norm(self.T))
+
+    def summary(self) -> str:
+        kl, kr = self.left.K, self.right.K
+        return (f"pairs used {self.pairs_used}/{self.pairs_total}; reprojection RMS: stereo "
+                f"{self.rms_stereo:.3f} px, left {self.rms_left:.3f} px, right "
+                f"{self.rms_right:.3f} px; baseline {self.baseline * 1e3:.4f} mm; "
+                f"left fx {kl[0, 0]:.2f} fy {kl[1, 1]:.2f}; right fx {kr[0, 0]:.2f} "
+                f"fy {kr[1, 1]:.2f}")
+
+    def save(self, directory: str | os.PathLike, left_name: str = "left.yaml",
+             right_name: str = "right.yaml") -> tuple[pathlib.Path, pathlib.Path]:
+        d = pathlib.Path(directory)
+        return (save_camera_info_yaml(d / left_name, self.left),
+                save_camera_info_yaml(d / right_name, self.right))
+
+
+def board_points(pattern: tuple[int, int], square: float) -> np.ndarray:
+    """3-D inner-corner positions (cols x rows, row-major as OpenCV reports them), z = 0."""
+    cols, rows = pattern
+    grid = np.zeros((rows * cols, 3), np.float32)
+    grid[:, :2] = np.mgrid[0:cols, 0:rows].T.reshape(-1, 2) * square
+    return grid
+
+
+def find_corners(gray: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
+    """Sub-pixel inner corners (N, 1, 2) float32 of a checkerboard, or None if not found."""
+    if gray.ndim == 3:
+        gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    found, corners = cv2.findChessboardCorners(gray, pattern, flags=flags)
+    if not found:
+        return None
+    # refine window ~ a third of the smallest corner spacing
+    c = corners.reshape(-1, 2)
+    spacing = np.min(np.linalg.norm(np.diff(c.reshape(pattern[1], pattern[0], 2), axis=1),
+                                    axis=2))
+    win = int(np.clip(spacing / 3, 2, 11))
+    corners = cv2.cornerSubPix(gray, corners, (win, win), (-1, -1), SUBPIX_CRITERIA)
+    return corners.astype(np.float32)
+
+
+def calibrate_stereo(pairs: Iterable[tuple[np.ndarray, np.ndarray]], pattern: tuple[int, int],
+                     square: float, fix_k3: bool = True, min_pairs: int = 5,
+                     on_pair: Callable[[int, bool], None] | None = None
+                     ) -> StereoCalibrationResult:
+    """Calibrate a stereo pair from checkerboard image pairs (grey or BGR arrays)."""
+    if square <= 0:
+        raise CalibrationError("square size must be positive (metres)")
+    obj = board_points(pattern, square)
+    objs, left_pts, right_pts = [], [], []
+    size = None
+    total = 0
+    for i, (left, right) in enumerate(pairs):
+        total += 1
+        if left.shape[:2] != right.shape[:2]:
+            raise CalibrationError(f"pair {i}: left and right images differ in size")
+        if size is None:
+            size = (left.shape[1], left.shape[0])
+        elif size != (left.shape[1], left.shape[0]):
+            raise CalibrationError(f"pair {i}: image size {left.shape[1]}x{left.shape[0]} "
+                                   f"differs from the first pair's {size[0]}x{size[1]}")
+        cl, cr = find_corners(left, pattern), find_corners(right, pattern)
+        ok = cl is not None and cr is not None
+        if ok:
+            objs.append(obj)
+            left_pts.append(cl)
+            right_pts.append(cr)
+        if on_pair:
+            on_pair(i, ok)
+    if size is None:
+        raise CalibrationError("no image pairs")
+    if len(objs) < min_pairs:
+        raise CalibrationError(f"the {pattern[0]}x{pattern[1]} checkerboard was found in both "
+                               f"images of only {len(objs)} of {total} pairs; need at least "
+                               f"{min_pairs} (check --pattern: inner corners, columns x rows)")
+    flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    rms_l, K1, D1, _, _ = cv2.calibrateCamera(objs, left_pts, size, None, None, flags=flags,
+                                              criteria=crit)
+    rms_r, K2, D2, _, _ = cv2.calibrateCamera(objs, right_pts, size, None, None, flags=flags,
+                                              criteria=crit)
+    out = cv2.stereoCalibrate(objs, left_pts, right_pts, K1, D1, K2, D2, size,
+                              flags=flags | cv2.CALIB_USE_INTRINSIC_GUESS, criteria=crit)
+    rms, K1, D1, K2, D2, R, T = out[:7]
+    R1, R2, P1, P2, _Q, _a, _b = cv2.stereoRectify(K1, D1, K2, D2, size, R, T.reshape(3, 1),
+                                                   flags=cv2.CALIB_ZERO_DISPARITY, alpha=0.0)
+    left = CameraCalibration(size[0], size[1], K1, D1.reshape(-1)[:5], R1, P1,
+                             camera_name="tactile_left")
+    right = CameraCalibration(size[0], size[1], K2, D2.reshape(-1)[:5], R2, P2,
+                              camera_name="tactile_right")
+    return StereoCalibrationResult(left, right, np.asarray(R), np.asarray(T).reshape(3),
+                                   float(rms), float(rms_l), float(rms_r), len(objs), total)
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def _read(path: pathlib.Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    if image is None:
+        raise CalibrationError(f"{path}: not a readable image")
+    return image
+
+
+def folder_pairs(folder: str | os.PathLike) -> list[tuple[pathlib.Path, pathlib.Path]]:
+    """Image pairs in a folder: every file with 'left' in its name and its 'right' twin."""
+    d = pathlib.Path(folder)
+    if not d.is_dir():
+        raise CalibrationError(f"{d}: not a folder")
+    files = {p.name: p for p in d.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES}
+    pairs = []
+    for name in sorted(files):
+        if "left" in name:
+            twin = name.replace("left", "right")
+            if twin in files:
+                pairs.append((files[name], files[twin]))
+    if not pairs:
+        raise CalibrationError(f"{d}: no image pairs (expected names like left_000.png and "
+                               "right_000.png)")
+    return pairs
+
+
+def iter_folder_pairs(folder: str | os.PathLike) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    for left, right in folder_pairs(folder):
+        yield _read(left), _read(right)
+
+
+def iter_bag_pairs(path: str | os.PathLike, left_topic: str = "/tactile/left/image_raw",
+                   right_topic: str = "/tactile/right/image_raw", every: int = 1
+                   ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Image pairs of a bag, paired by exactly equal header stamps."""
+    from .bag_io import BagReader
+    from .images import to_gray
+
+    reader = BagReader(path)
+    reader.require_topics([left_topic, right_topic])
+    pending: dict[tuple[int, int], dict[str, np.ndarray]] = {}
+    count = 0
+    for raw, msg in reader.messages([left_topic, right_topic]):
+        stamp = (int(msg.header.stamp.sec), int(msg.header.stamp.nanosec))
+        slot = pending.setdefault(stamp, {})
+        slot[raw.topic] = to_gray(msg).copy()
+        if len(slot) == 2:
+            del pending[stamp]
+            if count % max(1, every) == 0:
+                yield slot[left_topic], slot[right_topic]
+            count += 1
+        for old in [s for s in pending if s < stamp][:-50]:  # drop unmatched old frames
+            del pending[old]
+
+
+# --------------------------------------------------------------------------- simulation
+
+
+def simulated_board_views(renderer: "object", pattern: tuple[int, int], square: float,
+                          views: int = 15, seed: int = 0
+                          ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Checkerboard image pairs rendered by the simulator at varied, fully visible poses."""
+    from .sim.artwork import checkerboard_albedo
+    from .sim.optics import rotation_xyz
+
+    rng = np.random.default_rng(seed)
+    cols, rows = pattern
+    centre = np.array([(cols - 1) * square / 2, (rows - 1) * square / 2, 0.0])
+    obj = board_points(pattern, square).astype(np.float64)
+    out: list[tuple[np.ndarray, np.ndarray]] = []
+    tries = 0
+    while len(out) < views and tries < views * 20:
+        tries += 1
+        R = rotation_xyz(np.radians(rng.uniform(-28, 28)), np.radians(rng.uniform(-28, 28)),
+                         np.radians(rng.uniform(-15, 15)))
+        position = np.array([rng.uniform(-0.0015, 0.0015), rng.uniform(-0.0012, 0.0012),
+                             rng.uniform(-0.003, 0.002)])
+        t = position - R @ centre
+        corners = obj @ R.T + t
+        ok = True
+        for cam in renderer.rig.cameras:  # type: ignore[attr-defined]
+            px = cam.project(corners)
+            m = 2.0 * square * cam.K[0, 0] / renderer.rig.params.distance  # type: ignore
+            if not ((px[:, 0] > m).all() and (px[:, 0] < cam.width - m).all()
+                    and (px[:, 1] > m).all() and (px[:, 1] < cam.height - m).all()):
+                ok = False
+        if not ok:
+            continue
+        def albedo(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+            return checkerboard_albedo(u, v, square, cols + 1, rows + 1)
+        images = [renderer.render_plane(i, R, t, albedo, rng=rng)  # type: ignore[attr-defined]
+                  for i in range(2)]
+        out.append((images[0], images[1]))
+    return out

@@ -1,0 +1,98 @@
+"""Stereo calibration on simulator-rendered checkerboards with known ground truth."""
+import argparse
+
+import numpy as np
+import pytest
+
+from tactile_sl_camera.bag_io import BagWriter
+from tactile_sl_camera.calibration import (
+    CalibrationError,
+    calibrate_stereo,
+    iter_bag_pairs,
+    simulated_board_views,
+)
+from tactile_sl_camera.camera_info import load_camera_info_yaml
+from tactile_sl_camera.cli import calibrate_cmd
+from tactile_sl_camera.images import image_fields
+from tactile_sl_camera.sim.artwork import Artwork
+from tactile_sl_camera.sim.render import Renderer
+
+PATTERN = (9, 6)
+SQUARE = 0.001
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    blank = Artwork(np.ones((8, 8), np.float32), (3.5, 3.5), 4.0, 0.0005, 1, 1)
+    return Renderer(blank)
+
+
+@pytest.fixture(scope="module")
+def views(renderer):
+    return simulated_board_views(renderer, PATTERN, SQUARE, views=12, seed=1)
+
+
+def _cli(*argv):
+    parser = argparse.ArgumentParser()
+    calibrate_cmd.register(parser.add_subparsers())
+    args = parser.parse_args(["calibrate", *argv])
+    return args.func(args)
+
+
+def test_calibration_recovers_the_true_optics(renderer, views):
+    result = calibrate_stereo(views, PATTERN, SQUARE)
+    rig = renderer.rig
+    true_baseline = np.linalg.norm(rig.T)
+    baseline_err = abs(result.baseline / true_baseline - 1)
+    focal_err = max(abs(est.K[i, i] / true.K[i, i] - 1)
+                    for est, true in ((result.left, rig.left), (result.right, rig.right))
+                    for i in (0, 1))
+    print(f"\nRMS {result.rms_stereo:.3f} px, baseline error {baseline_err * 100:.3f} %, "
+          f"worst focal error {focal_err * 100:.3f} %")
+    assert result.pairs_used == len(views)
+    assert result.rms_stereo < 0.3
+    assert baseline_err < 0.01
+    assert focal_err < 0.005
+    # rectified right P carries -fx' * baseline
+    assert -result.right.P[0, 3] / result.right.P[0, 0] == pytest.approx(result.baseline,
+                                                                         rel=1e-6)
+
+
+def test_cli_on_a_folder_writes_loadable_camera_info(tmp_path, views):
+    import cv2
+
+    for i, (left, right) in enumerate(views):
+        cv2.imwrite(str(tmp_path / f"left_{i:03d}.png"), left)
+        cv2.imwrite(str(tmp_path / f"right_{i:03d}.png"), right)
+    out = tmp_path / "calib"
+    assert _cli("--folder", str(tmp_path), "--pattern", "9x6", "--square", "0.001",
+                "-o", str(out)) == 0
+    left = load_camera_info_yaml(out / "left.yaml")
+    right = load_camera_info_yaml(out / "right.yaml")
+    assert left.width == 640 and right.height == 480
+    assert -right.P[0, 3] / right.P[0, 0] == pytest.approx(0.004, rel=0.01)
+    # the wrong pattern size finds no board: a clear failure, not a crash
+    assert _cli("--folder", str(tmp_path), "--pattern", "7x7", "-o", str(out)) == 1
+
+
+def test_bag_input_pairs_by_stamp(tmp_path, views):
+    path = tmp_path / "boards.mcap"
+    with BagWriter(path) as bag:
+        for i, (left, right) in enumerate(views[:3]):
+            stamp = {"sec": 100 + i, "nanosec": 5}
+            for topic, img in (("/tactile/left/image_raw", left),
+                               ("/tactile/right/image_raw", right)):
+                bag.write(topic, "sensor_msgs/msg/Image",
+                          {"header": {"stamp": stamp, "frame_id": "f"},
+                           **image_fields(img, "mono8")}, (100 + i) * 10**9 + 5)
+    pairs = list(iter_bag_pairs(path))
+    assert len(pairs) == 3
+    assert np.array_equal(pairs[1][0], views[1][0]) and np.array_equal(pairs[1][1], views[1][1])
+    with pytest.raises(CalibrationError, match="only 3 of 3"):
+        calibrate_stereo(pairs, PATTERN, SQUARE)
+
+
+def test_no_board_is_a_clear_error():
+    blank = np.full((480, 640), 128, np.uint8)
+    with pytest.raises(CalibrationError, match="found in both images of only 0"):
+        calibrate_stereo([(blank, blank)] * 5, PATTERN, SQUARE)
