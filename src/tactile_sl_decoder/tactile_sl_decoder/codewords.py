@@ -196,6 +196,49 @@ class Codebook:
         return cell
 
 
+_OTHERS = np.array([o for o in range(9) if o != 4])
+_DR = _OTHERS // 3 - 1
+_DC = _OTHERS % 3 - 1
+
+
+@dataclass
+class _Layout:
+    """Cell numbering used inside the decoder: padded, one block per image (group).
+
+    Cell (g, r, c) is ``(g * H + r + 1) * W + c + 1`` with H = rows + 2, W = cols + 2, so the
+    neighbouring cell at (dr, dc) is a constant offset away and the one-cell padding tells
+    "outside the pattern" by table look-up: no integer division in the hot loops.
+    """
+
+    rows: int
+    cols: int
+    groups: int
+
+    def __post_init__(self) -> None:
+        self.H, self.W = self.rows + 2, self.cols + 2
+        self.size = self.groups * self.H * self.W
+        self.delta = _DR * self.W + _DC                      # (8,) offsets of the neighbours
+        self.valid = np.zeros((self.groups, self.H, self.W), dtype=bool)
+        self.valid[:, 1:-1, 1:-1] = True
+        self.valid = self.valid.reshape(-1)
+
+    def encode(self, group: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
+        """Internal cell numbers."""
+        return (group * self.H + row + 1) * self.W + col + 1
+
+    def split(self, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(group, row, col) of internal cell numbers."""
+        gr, c = np.divmod(cell, self.W)
+        g, r = np.divmod(gr, self.H)
+        return g, r - 1, c - 1
+
+    def values(self, array: np.ndarray) -> np.ndarray:
+        """Pattern value of every internal cell (-1 in the padding)."""
+        out = np.full((self.groups, self.H, self.W), -1, dtype=np.int64)
+        out[:, 1:-1, 1:-1] = array[None]
+        return out.reshape(-1)
+
+
 def _group_votes(glyph: np.ndarray, cell: np.ndarray, ncells: int
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per glyph with votes: (glyph, winning cell, winning count, total count)."""
@@ -224,10 +267,20 @@ class CodewordDecoder:
         self.codebook = codebook
         self.params = params or DecodeParams()
 
-    def decode(self, grid: Grid, labels: np.ndarray, confidence: np.ndarray) -> Decoded:
-        """Decode every glyph of one image (labels 255 = unknown)."""
+    def decode(self, grid: Grid, labels: np.ndarray, confidence: np.ndarray,
+               groups: np.ndarray | None = None) -> Decoded:
+        """Decode every glyph of one image (labels 255 = unknown).
+
+        Several images can be decoded in one call (cheaper than one call each: the cost is
+        mostly per numpy operation, not per glyph): their glyphs must be far apart in the
+        lattice (e.g. offset coordinates) and ``groups`` says which image each glyph is in.
+        Cells are unique, and regions checked, per group.
+        """
         cb, p = self.codebook, self.params
         n = grid.nbr.shape[0]
+        groups = (np.zeros(n, dtype=np.int64) if groups is None
+                  else np.asarray(groups, dtype=np.int64).reshape(-1))
+        lay = _Layout(cb.rows, cb.cols, int(groups.max()) + 1 if n else 1)
         labels = np.asarray(labels).astype(np.int64).reshape(-1)
         confidence = np.asarray(confidence, dtype=np.float64).reshape(-1)
         row = np.full(n, CELL_UNKNOWN, dtype=np.int32)
@@ -238,7 +291,7 @@ class CodewordDecoder:
         nbr = grid.nbr
         if p.mirrored:   # image columns run opposite to pattern columns
             nbr = nbr.reshape(n, 3, 3)[:, :, ::-1].reshape(n, 9)
-        pgrid = Grid(nbr, grid.col_vec, grid.row_vec, grid.spacing_px)
+        pgrid = Grid(nbr, grid.col_vec, grid.row_vec, grid.spacing_px, grid.pts)
         widx = window_indices(pgrid, cb.window)                    # (N, n) glyph indices
         lab = np.where(confidence >= p.min_confidence, labels, LABEL_UNKNOWN)
         lab = np.where((lab >= 0) & (lab < cb.symbols), lab, cb.symbols)
@@ -260,50 +313,49 @@ class CodewordDecoder:
         pos_c = np.tile(np.arange(wcw), wr) - b0
         ar, ac = anchor_cell[ok] // cb.cols, anchor_cell[ok] % cb.cols
         g = widx[ok]                                              # (K, n)
-        vr = ar[:, None] + pos_r[None, :]
-        vc = ac[:, None] + pos_c[None, :]
+        anchor = lay.encode(groups[ok], ar, ac)
+        vcell = anchor[:, None] + (pos_r * lay.W + pos_c)[None, :]   # internal numbering
         m = g >= 0
-        ncells = cb.rows * cb.cols
-        gg, cc, top, total = _group_votes(g[m], (vr * cb.cols + vc)[m], ncells)
+        gg, cc, top, total = _group_votes(g[m], vcell[m], lay.size)
         accept = (top >= p.min_votes) & (top >= p.vote_ratio * total)
         cell = np.full(n, -1, dtype=np.int64)
         cell[gg[accept]] = cc[accept]
         votes_out[gg[accept]] = top[accept]
 
-        cell = self._consistency(pgrid.nbr, cell)
-        cell = self._islands(pgrid, cell)
+        cell = self._consistency(pgrid.nbr, cell, lay)
+        cell = self._islands(pgrid, cell, lay)
+        values = lay.values(cb.array)
         for _ in range(p.grow_iterations):
-            grown = self._grow(pgrid.nbr, cell, lab)
+            grown = self._grow(pgrid.nbr, cell, lab, lay, values)
             if not np.any(grown != cell):
                 break
-            cell = self._consistency(pgrid.nbr, grown)
-        cell = self._islands(pgrid, cell)
+            cell = self._consistency(pgrid.nbr, grown, lay)
+        cell = self._islands(pgrid, cell, lay)
         has = cell >= 0
-        row[has] = (cell[has] // cb.cols).astype(np.int32)
-        col[has] = (cell[has] % cb.cols).astype(np.int32)
+        _, r, c = lay.split(cell[has])
+        row[has] = r.astype(np.int32)
+        col[has] = c.astype(np.int32)
         return Decoded(row, col, votes_out, windows_decoded)
 
-    def _expected(self, nbr: np.ndarray, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    @staticmethod
+    def _expected(nbr: np.ndarray, cell: np.ndarray, lay: _Layout
+                  ) -> tuple[np.ndarray, np.ndarray]:
         """Per glyph and 8-neighbour: the neighbour's cell and the cell it implies here.
 
-        Both (N, 8), -1 where unknown.
+        Both (N, 8) internal cell numbers, -1 where unknown or outside the pattern.
         """
-        cols = self.codebook.cols
-        others = [o for o in range(9) if o != 4]
-        j = nbr[:, others]
+        j = nbr[:, _OTHERS]
         cj = np.where(j >= 0, cell[np.maximum(j, 0)], -1)
-        dr = np.array([o // 3 - 1 for o in others])
-        dc = np.array([o % 3 - 1 for o in others])
-        r = cj // cols - dr[None, :]
-        c = cj % cols - dc[None, :]
-        inside = (cj >= 0) & (r >= 0) & (r < self.codebook.rows) & (c >= 0) & (c < cols)
-        return cj, np.where(inside, r * cols + c, -1)
+        implied = cj - lay.delta[None, :]
+        known = cj >= 0
+        known &= lay.valid[np.where(known, implied, 0)]
+        return cj, np.where(known, implied, -1)
 
-    def _consistency(self, nbr: np.ndarray, cell: np.ndarray) -> np.ndarray:
+    def _consistency(self, nbr: np.ndarray, cell: np.ndarray, lay: _Layout) -> np.ndarray:
         """Drop glyphs whose decided neighbours disagree with them, and duplicate cells."""
         cell = cell.copy()
         for _ in range(2):
-            cj, implied = self._expected(nbr, cell)
+            cj, implied = self._expected(nbr, cell, lay)
             known = (cj >= 0) & (cell[:, None] >= 0)
             agree = (known & (implied == cell[:, None])).sum(axis=1)
             disagree = (known & (implied != cell[:, None])).sum(axis=1)
@@ -317,7 +369,7 @@ class CodewordDecoder:
         cell[has[cnt[inv] > 1]] = -1
         return cell
 
-    def _islands(self, grid: Grid, cell: np.ndarray) -> np.ndarray:
+    def _islands(self, grid: Grid, cell: np.ndarray, lay: _Layout) -> np.ndarray:
         """Keep only sizeable, mutually consistent regions of decoded glyphs.
 
         Decoded glyphs linked by lattice neighbours holding the neighbouring cells form
@@ -326,27 +378,33 @@ class CodewordDecoder:
         the largest region's lattice predicts there, or it is dropped too (a locally
         consistent but misplaced patch, e.g. a misread that copies another pattern area).
         """
-        from scipy.sparse import coo_matrix
+        from scipy.sparse import csr_matrix
         from scipy.sparse.csgraph import connected_components
 
-        p, cb = self.params, self.codebook
+        p = self.params
         n = len(cell)
         dec = np.flatnonzero(cell >= 0)
         if len(dec) == 0:
             return cell
-        others = [o for o in range(9) if o != 4]
-        _, implied = self._expected(grid.nbr, cell)
+        _, implied = self._expected(grid.nbr, cell, lay)
         ok = (implied == cell[:, None]) & (cell[:, None] >= 0)
-        i, k = np.nonzero(ok)
-        j = grid.nbr[:, others][i, k]
-        graph = coo_matrix((np.ones(len(i), dtype=np.int8), (i, j)), shape=(n, n))
+        # CSR straight from the neighbour table (8 slots per glyph; no link = self loop).
+        indices = np.where(ok, grid.nbr[:, _OTHERS], np.arange(n)[:, None]).reshape(-1)
+        graph = csr_matrix((np.ones(8 * n, dtype=np.int8), indices,
+                            np.arange(0, 8 * n + 1, 8)), shape=(n, n))
         _, comp = connected_components(graph, directed=False)
         sizes = np.bincount(comp[dec], minlength=comp.max() + 1)
         keep = sizes[comp] >= p.min_component
-        main = int(np.argmax(sizes))
-        if grid.pts is not None and sizes[main] >= p.min_component and grid.spacing_px > 0:
-            others_dec = dec[(comp[dec] != main) & keep[dec]]
-            main_idx = dec[comp[dec] == main]
+        # The largest region of each image (group) is the reference for its other regions.
+        dec_group = lay.split(cell[dec])[0]
+        is_main = np.zeros(len(sizes), dtype=bool)
+        for grp in np.unique(dec_group):
+            cand = np.unique(comp[dec[dec_group == grp]])
+            is_main[cand[np.argmax(sizes[cand])]] = True
+        if grid.pts is not None and grid.spacing_px > 0 and not is_main.all():
+            main_dec = is_main[comp[dec]] & (sizes[comp[dec]] >= p.min_component)
+            others_dec = dec[~is_main[comp[dec]] & keep[dec]]
+            main_idx = dec[main_dec]
             if len(others_dec) and len(main_idx):
                 from scipy.spatial import cKDTree
                 tree = cKDTree(grid.pts[main_idx])
@@ -361,7 +419,7 @@ class CodewordDecoder:
                     steps = np.linalg.solve(M + 1e-12 * np.eye(2), d[..., None])[..., 0]
                 dc = np.rint(steps[:, 0]).astype(np.int64) * (-1 if p.mirrored else 1)
                 dr = np.rint(steps[:, 1]).astype(np.int64)
-                pred = cell[b] + dr * cb.cols + dc
+                pred = cell[b] + dr * lay.W + dc
                 agree = pred == cell[a]
                 votes_ok = np.bincount(comp[a], weights=agree, minlength=len(sizes))
                 votes_all = np.bincount(comp[a], minlength=len(sizes))
@@ -371,13 +429,14 @@ class CodewordDecoder:
         out[~keep] = -1
         return out
 
-    def _grow(self, nbr: np.ndarray, cell: np.ndarray, lab: np.ndarray) -> np.ndarray:
+    def _grow(self, nbr: np.ndarray, cell: np.ndarray, lab: np.ndarray, lay: _Layout,
+              values: np.ndarray) -> np.ndarray:
         """Give undecided glyphs the cell implied by agreeing decided neighbours.
 
         Only if their own label (when known) matches the pattern there and the cell is free.
         """
         p, cb = self.params, self.codebook
-        _, implied = self._expected(nbr, cell)
+        _, implied = self._expected(nbr, cell, lay)
         undecided = cell < 0
         imp = np.where(undecided[:, None], implied, -1)
         srt = np.sort(imp, axis=1)
@@ -385,10 +444,10 @@ class CodewordDecoder:
         n_top = (imp == top[:, None]).sum(axis=1)
         n_any = (imp >= 0).sum(axis=1)
         label_known = lab < cb.symbols
-        pattern_val = np.where(top >= 0, cb.array.reshape(-1)[np.maximum(top, 0)], -1)
+        pattern_val = np.where(top >= 0, values[np.maximum(top, 0)], -1)
         label_ok = np.where(label_known, pattern_val == lab, n_top >= p.grow_min_agree + 1)
         ok = undecided & (top >= 0) & (n_top == n_any) & (n_top >= p.grow_min_agree) & label_ok
-        taken = np.zeros(cb.rows * cb.cols, dtype=bool)
+        taken = np.zeros(lay.size, dtype=bool)
         taken[cell[cell >= 0]] = True
         ok &= ~taken[np.maximum(top, 0)]
         out = cell.copy()

@@ -38,7 +38,7 @@ CENTRE = 4
 class GridParams:
     """Tolerances of the lattice search (relative to the local glyph spacing)."""
 
-    k_neighbours: int = 12          # candidates considered per glyph (incl. itself)
+    k_neighbours: int = 11          # candidates considered per glyph (incl. itself)
     init_angle_deg: float = 35.0    # max angle between a displacement and a lattice direction
     init_min_len: float = 0.55      # displacement length gate for the local vectors (x spacing)
     init_max_len: float = 1.8
@@ -84,25 +84,28 @@ def _global_frame(disp: np.ndarray, dist: np.ndarray, spacing: float) -> np.ndar
     return np.array([np.cos(phi), np.sin(phi)])
 
 
-def _best_along(disp: np.ndarray, dist: np.ndarray, valid: np.ndarray, direction: np.ndarray,
-                spacing: float, p: GridParams) -> tuple[np.ndarray, np.ndarray]:
-    """Per glyph, the shortest neighbour displacement gated around ``direction``.
+def _best_four(disp: np.ndarray, dist: np.ndarray, valid: np.ndarray, col_dir: np.ndarray,
+               row_dir: np.ndarray, spacing: float, p: GridParams
+               ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per glyph, the shortest neighbour step within angle/length gates of +-col, +-row.
 
-    Returns the displacement (N, 2), NaN where none, and the candidate's column in the
-    k-NN table (N,), -1 where none; ``direction`` is (2,) or per-glyph (N, 2).
+    Four (displacement (N, 2) NaN where none, k-NN column (N,) -1 where none) pairs.
     """
-    direction = np.broadcast_to(direction, (disp.shape[0], 2))
-    unit = direction / np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-12)
-    cosang = np.einsum("nkj,nj->nk", disp, unit) / np.maximum(dist, 1e-12)
-    ok = valid & (cosang > np.cos(np.radians(p.init_angle_deg)))
-    ok &= (dist > p.init_min_len * spacing) & (dist < p.init_max_len * spacing)
-    score = np.where(ok, dist, np.inf)
-    k = np.argmin(score, axis=1)
+    inv = 1.0 / np.maximum(dist, 1e-12)
+    cos_c = (disp[..., 0] * col_dir[0] + disp[..., 1] * col_dir[1]) * inv
+    cos_r = (disp[..., 0] * row_dir[0] + disp[..., 1] * row_dir[1]) * inv
+    gate = valid & (dist > p.init_min_len * spacing) & (dist < p.init_max_len * spacing)
+    t = np.cos(np.radians(p.init_angle_deg))
     rows = np.arange(disp.shape[0])
-    out = disp[rows, k].copy()
-    none = ~np.isfinite(score[rows, k])
-    out[none] = np.nan
-    return out, np.where(none, -1, k)
+    out = []
+    for ok in (cos_c > t, cos_c < -t, cos_r > t, cos_r < -t):
+        score = np.where(ok & gate, dist, np.inf)
+        k = np.argmin(score, axis=1)
+        none = ~np.isfinite(score[rows, k])
+        step = disp[rows, k]
+        step[none] = np.nan
+        out.append((step, np.where(none, -1, k)))
+    return out
 
 
 def _combine(forward: np.ndarray, backward: np.ndarray, fallback: np.ndarray) -> np.ndarray:
@@ -152,8 +155,7 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     row_dir = np.array([-col_dir[1], col_dir[0]])     # +v side of the column direction
 
     # Local lattice vectors, following stretching: the best-aligned neighbour each way.
-    steps = [_best_along(disp, dist, valid, d, spacing, p)
-             for d in (col_dir, -col_dir, row_dir, -row_dir)]
+    steps = _best_four(disp, dist, valid, col_dir, row_dir, spacing, p)
     col_vec = _combine(steps[0][0], steps[1][0], col_dir * spacing)
     row_vec = _combine(steps[2][0], steps[3][0], row_dir * spacing)
     rows = np.arange(n)
@@ -177,10 +179,11 @@ def _assign(pts: np.ndarray, disp: np.ndarray, idx: np.ndarray, valid: np.ndarra
     others = np.array([o for o in range(9) if o != CENTRE])
     # Predicted displacement of every off-centre neighbour, (N, 8, 2); all at once.
     pred = (OFFSETS[others, 1][None, :, None] * col_vec[:, None, :]
-            + OFFSETS[others, 0][None, :, None] * row_vec[:, None, :])
-    # Squared distances |disp - pred|^2, (N, 8, K), as plain elementwise operations.
-    du = disp[:, None, :, 0] - pred[:, :, None, 0]
-    dv = disp[:, None, :, 1] - pred[:, :, None, 1]
+            + OFFSETS[others, 0][None, :, None] * row_vec[:, None, :]).astype(np.float32)
+    d32 = disp.astype(np.float32)
+    # Squared distances |disp - pred|^2, (N, 8, K), float32 elementwise (pixels: plenty).
+    du = d32[:, None, :, 0] - pred[:, :, None, 0]
+    dv = d32[:, None, :, 1] - pred[:, :, None, 1]
     err = du * du
     err += dv * dv
     if not valid.all():

@@ -1,0 +1,65 @@
+"""The whole sensor: a source of stereo images (bag replay or camera) and the decoder.
+
+ros2 launch tactile_sl_decoder tactile_sl.launch.py bag:=bags/press.mcap
+ros2 launch tactile_sl_decoder tactile_sl.launch.py bag:=bags/press.mcap stages:=true
+ros2 launch tactile_sl_decoder tactile_sl.launch.py source:=camera
+
+source:=replay (default) plays `bag` with tactile_sl_camera's replay node; source:=camera
+starts tactile_sl_camera's stereo_camera node instead.  stages:=false (default) runs
+extraction and classification inside the decoder (lowest latency); stages:=true chains the
+symbol_extractor / symbol_classifier nodes per camera and the decoder consumes their
+labelled SymbolArrays, giving the same points.
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
+from launch.conditions import IfCondition, LaunchConfigurationEquals
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.substitutions import LaunchConfiguration, PythonExpression
+from launch_ros.actions import Node
+
+
+def generate_launch_description() -> LaunchDescription:
+    """Source node, optional stage nodes, decoder; all in one namespace."""
+    decoder_share = get_package_share_directory("tactile_sl_decoder")
+    camera_share = get_package_share_directory("tactile_sl_camera")
+    ns = LaunchConfiguration("namespace")
+    stages = LaunchConfiguration("stages")
+    decoder_yaml = os.path.join(decoder_share, "config", "decoder.yaml")
+    replay_yaml = os.path.join(camera_share, "config", "replay.yaml")
+    return LaunchDescription([
+        DeclareLaunchArgument("namespace", default_value="/tactile"),
+        DeclareLaunchArgument("source", default_value="replay",
+                              description="replay (a bag) or camera"),
+        DeclareLaunchArgument("bag", default_value="", description="bag for source:=replay"),
+        DeclareLaunchArgument("rate", default_value="1.0", description="replay speed"),
+        DeclareLaunchArgument("loop", default_value="false"),
+        DeclareLaunchArgument("stages", default_value="false",
+                              description="chain the extraction/classification stage nodes"),
+        DeclareLaunchArgument("mirrored", default_value="false"),
+        Node(
+            package="tactile_sl_camera", executable="replay", name="replay", namespace=ns,
+            parameters=[replay_yaml, {"bag": LaunchConfiguration("bag"),
+                                      "rate": LaunchConfiguration("rate"),
+                                      "loop": LaunchConfiguration("loop")}],
+            condition=LaunchConfigurationEquals("source", "replay"), output="screen"),
+        Node(
+            package="tactile_sl_camera", executable="stereo_camera", name="stereo_camera",
+            namespace=ns, condition=LaunchConfigurationEquals("source", "camera"),
+            output="screen"),
+        IncludeLaunchDescription(
+            PythonLaunchDescriptionSource(
+                os.path.join(decoder_share, "launch", "symbols.launch.py")),
+            launch_arguments={"namespace": ns}.items(),
+            condition=IfCondition(stages)),
+        Node(
+            package="tactile_sl_decoder", executable="decoder", name="decoder", namespace=ns,
+            parameters=[decoder_yaml, {
+                "input": PythonExpression(["'symbols' if '", stages, "' == 'true' else 'images'"]),
+                "mirrored": LaunchConfiguration("mirrored")}],
+            remappings=[("left/symbols", "left/labelled_symbols"),
+                        ("right/symbols", "right/labelled_symbols")],
+            output="screen"),
+    ])

@@ -1,0 +1,279 @@
+"""``decoder``: stereo images (or the stage nodes' SymbolArrays) in, contract point clouds out.
+
+Subscribes (relative names, sensor-data QoS)::
+
+    input=images  : left/image_raw, right/image_raw          (sensor_msgs/Image)
+    input=symbols : left/symbols, right/symbols              (tactile_sl_msgs/SymbolArray)
+    always        : left/camera_info, right/camera_info      (sensor_msgs/CameraInfo)
+
+Publishes ``points`` (sensor_msgs/PointCloud2, one per stereo frame, stamped exactly like
+the left image) and, for inspection, ``left/symbols_decoded`` / ``right/symbols_decoded``
+(labelled and decoded SymbolArrays).  All the work is done by the shared
+:class:`~tactile_sl_decoder.pipeline.StereoPipeline`, so ``tactile-sl replay`` on a bag gives
+the same points.  Bad input (encodings, sizes, CameraInfo, unsynchronised stereo, empty
+images) is reported with a throttled warning and the frame is skipped; the node keeps
+running.  Parameters: see ``config/decoder.yaml`` and ``docs/decoder.md``.
+"""
+from __future__ import annotations
+
+import array
+import time
+from typing import Any
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
+
+from tactile_sl_camera.clouds import cloud_fields
+from tactile_sl_camera.images import ImageFormatError, to_gray
+from tactile_sl_decoder.pipeline import (
+    Glyphs,
+    PatternSpec,
+    PipelineInputError,
+    PipelineParams,
+    StereoPipeline,
+    StereoResult,
+    StereoSync,
+    glyphs_from_symbol_array,
+)
+
+try:
+    from tactile_sl_msgs.msg import SymbolArray
+except ImportError:  # pragma: no cover - interfaces not built
+    SymbolArray = None
+
+
+def _d(text: str) -> ParameterDescriptor:
+    return ParameterDescriptor(description=text)
+
+
+def stamp_ns(header: Any) -> int:
+    """Header stamp as integer nanoseconds (exact)."""
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+class DecoderNode(Node):
+    """Runs the stereo pipeline on every synchronised stereo frame."""
+
+    def __init__(self) -> None:
+        super().__init__("decoder")
+        self.declare_parameter("input", "images", _d(
+            "'images': run extraction + classification in-process on left/right image_raw "
+            "(lowest latency); 'symbols': consume left/right symbols from the stage nodes."))
+        self.declare_parameter("pattern_file", "", _d(
+            "Pattern YAML (contract format); empty = the pattern the package ships."))
+        self.declare_parameter("classifier_weights", "", _d(
+            "Classifier weights from `tactile-sl train`; empty = the shipped ones."))
+        self.declare_parameter("mirrored", False, _d(
+            "The cameras see the artwork mirrored (looking through the elastomer)."))
+        self.declare_parameter("sync_slop", 0.0, _d(
+            "Seconds by which left/right stamps may differ when no exactly equal stamp "
+            "exists (0 = exact stamps only, the contract's stereo convention)."))
+        self.declare_parameter("queue_size", 5, _d(
+            "Unpaired messages kept per side while waiting for the stereo partner."))
+        self.declare_parameter("max_age", 0.5, _d(
+            "Seconds after which an unpaired message is dropped as stale."))
+        self.declare_parameter("publish_symbols", True, _d(
+            "Publish left/right symbols_decoded (labelled + decoded SymbolArrays)."))
+        self.declare_parameter("publish_patches", False, _d(
+            "Include the glyph patches in symbols_decoded (larger messages)."))
+        self.declare_parameter("publish_empty", True, _d(
+            "Publish a cloud with no point for frames that decoded nothing."))
+        self.declare_parameter("threads", 2, _d(
+            "Worker threads for the two images of a frame (1 = sequential)."))
+        self.declare_parameter("min_votes", 2, _d(
+            "Agreeing window decodes needed before a glyph gets a cell."))
+        self.declare_parameter("min_component", 16, _d(
+            "Smallest region of mutually consistent decoded glyphs that is kept."))
+        self.declare_parameter("max_reprojection_px", 1.5, _d(
+            "Largest rectified reprojection error of a stereo pair (epipolar gate), px."))
+        self.declare_parameter("warn_period", 5.0, _d(
+            "Seconds between two warnings of the same kind (throttling)."))
+
+        gp = self.get_parameter
+        self.input_mode = str(gp("input").value)
+        if self.input_mode not in ("images", "symbols"):
+            raise ValueError(f"parameter input must be 'images' or 'symbols', "
+                             f"got {self.input_mode!r}")
+        params = PipelineParams()
+        params.decode.mirrored = bool(gp("mirrored").value)
+        params.decode.min_votes = int(gp("min_votes").value)
+        params.decode.min_component = int(gp("min_component").value)
+        params.stereo.max_reprojection_px = float(gp("max_reprojection_px").value)
+        params.threads = int(gp("threads").value)
+        pattern = PatternSpec.load(str(gp("pattern_file").value) or None)
+        classifier = None
+        if self.input_mode == "images":
+            from tactile_sl_decoder.classifier import Classifier
+
+            classifier = Classifier.load(str(gp("classifier_weights").value) or None)
+        self.pipeline = StereoPipeline(pattern, classifier, params)
+        self.sync = StereoSync(int(float(gp("sync_slop").value) * 1e9),
+                               int(gp("queue_size").value),
+                               int(float(gp("max_age").value) * 1e9))
+        self.publish_symbols = bool(gp("publish_symbols").value)
+        self.publish_patches = bool(gp("publish_patches").value)
+        self.publish_empty = bool(gp("publish_empty").value)
+        self.warn_period = float(gp("warn_period").value)
+        self._last_warn: dict[str, float] = {}
+        self.info: dict[str, Any] = {"left": None, "right": None}
+        self.stats = {"frames": 0, "skipped": 0, "dropped": 0, "points": 0}
+        self._proc_ms: list[float] = []
+
+        sensor = qos_profile_sensor_data
+        out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
+                             reliability=ReliabilityPolicy.RELIABLE)
+        self.pub_points = self.create_publisher(PointCloud2, "points", out_qos)
+        self.pub_sym = {}
+        if self.publish_symbols and SymbolArray is not None:
+            for side in ("left", "right"):
+                self.pub_sym[side] = self.create_publisher(
+                    SymbolArray, f"{side}/symbols_decoded", out_qos)
+        for side in ("left", "right"):
+            self.create_subscription(CameraInfo, f"{side}/camera_info",
+                                     lambda m, s=side: self._on_info(s, m), sensor)
+            if self.input_mode == "images":
+                self.create_subscription(Image, f"{side}/image_raw",
+                                         lambda m, s=side: self._on_frame(s, m), sensor)
+            else:
+                if SymbolArray is None:
+                    raise RuntimeError("tactile_sl_msgs is not built: input=symbols unavailable")
+                self.create_subscription(SymbolArray, f"{side}/symbols",
+                                         lambda m, s=side: self._on_frame(s, m), sensor)
+        self.create_timer(10.0, self._report)
+        self.get_logger().info(
+            f"decoder ready: input={self.input_mode}, pattern {pattern.array.shape[0]}x"
+            f"{pattern.array.shape[1]} (window {pattern.window[0]}x{pattern.window[1]}, "
+            f"h={pattern.min_hamming}), mirrored={params.decode.mirrored}")
+
+    # ------------------------------------------------------------------ callbacks
+
+    def warn(self, kind: str, text: str) -> None:
+        """A warning at most once per ``warn_period`` per kind of problem."""
+        now = time.monotonic()
+        if now - self._last_warn.get(kind, -1e9) >= self.warn_period:
+            self._last_warn[kind] = now
+            self.get_logger().warning(text)
+
+    def _on_info(self, side: str, msg: CameraInfo) -> None:
+        self.info[side] = msg
+
+    def _on_frame(self, side: str, msg: Any) -> None:
+        ev = self.sync.add(side, stamp_ns(msg.header), msg)
+        for s, stamp, reason in ev.dropped:
+            self.stats["dropped"] += 1
+            self.warn(f"drop-{reason}", f"dropped {s} frame {stamp / 1e9:.6f}: {reason}")
+        for _, left, right in ev.pairs:
+            self._process(left, right)
+
+    def _process(self, left_msg: Any, right_msg: Any) -> None:
+        t0 = time.perf_counter()
+        stamp = (int(left_msg.header.stamp.sec), int(left_msg.header.stamp.nanosec))
+        try:
+            if self.info["left"] is None or self.info["right"] is None:
+                missing = [f"{s}/camera_info" for s in ("left", "right") if self.info[s] is None]
+                raise PipelineInputError(f"no CameraInfo received yet on {', '.join(missing)}")
+            if self.input_mode == "images":
+                result = self.pipeline.process(to_gray(left_msg), to_gray(right_msg),
+                                               self.info["left"], self.info["right"])
+            else:
+                result = self.pipeline.process_symbols(
+                    glyphs_from_symbol_array(left_msg), glyphs_from_symbol_array(right_msg),
+                    self.info["left"], self.info["right"])
+        except (PipelineInputError, ImageFormatError, ValueError) as exc:
+            self.stats["skipped"] += 1
+            kind = type(exc).__name__ + str(exc).split(":")[0][:40]
+            self.warn(kind, f"frame {stamp[0]}.{stamp[1]:09d} skipped: {exc}")
+            return
+        self.stats["frames"] += 1
+        self.stats["points"] += len(result.points)
+        if len(result.points) or self.publish_empty:
+            frame_id = result.frame_id or str(left_msg.header.frame_id)
+            self.pub_points.publish(make_cloud(result, stamp, frame_id))
+        if self.pub_sym:
+            for side, glyphs, src in (("left", result.left, left_msg),
+                                      ("right", result.right, right_msg)):
+                self.pub_sym[side].publish(make_symbol_array(glyphs, src.header,
+                                                             self.publish_patches))
+        self._proc_ms.append(1e3 * (time.perf_counter() - t0))
+
+    def _report(self) -> None:
+        if not self._proc_ms and not self.stats["skipped"]:
+            return
+        ms = np.asarray(self._proc_ms) if self._proc_ms else np.zeros(1)
+        self.get_logger().info(
+            f"{self.stats['frames']} frames, {self.stats['skipped']} skipped, "
+            f"{self.stats['dropped']} unpaired dropped; last 10 s: median "
+            f"{np.median(ms):.1f} ms, max {ms.max():.1f} ms per frame")
+        self._proc_ms = []
+
+
+# ---------------------------------------------------------------------- messages
+
+
+def make_cloud(result: StereoResult, stamp: tuple[int, int], frame_id: str) -> PointCloud2:
+    """Contract PointCloud2 (rclpy) from a pipeline result, stamped exactly."""
+    f = cloud_fields(result.points, stamp, frame_id)
+    msg = PointCloud2()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
+    msg.header.frame_id = frame_id
+    msg.height, msg.width = f["height"], f["width"]
+    msg.fields = [PointField(name=d["name"], offset=d["offset"], datatype=d["datatype"],
+                             count=d["count"]) for d in f["fields"]]
+    msg.is_bigendian = False
+    msg.point_step, msg.row_step = f["point_step"], f["row_step"]
+    msg.data = array.array("B", f["data"])
+    msg.is_dense = True
+    return msg
+
+
+def _arr(typecode: str, values: np.ndarray, dtype: Any) -> array.array:
+    return array.array(typecode, np.ascontiguousarray(values, dtype=dtype).tobytes())
+
+
+def make_symbol_array(g: Glyphs, header: Any, patches: bool = False) -> Any:
+    """SymbolArray (rclpy) of labelled + decoded glyphs, with the source image's header."""
+    msg = SymbolArray()
+    msg.header = header
+    msg.image_width, msg.image_height = int(g.image_width), int(g.image_height)
+    msg.spacing_px = float(g.spacing_px)
+    msg.u = _arr("f", g.u, np.float32)
+    msg.v = _arr("f", g.v, np.float32)
+    msg.area = _arr("f", g.area, np.float32)
+    msg.label = _arr("B", g.label, np.uint8)
+    msg.confidence = _arr("f", g.confidence, np.float32)
+    msg.row = _arr("i", g.row, np.int32)
+    msg.col = _arr("i", g.col, np.int32)
+    if patches and g.patches is not None and len(g):
+        msg.patch_size = int(g.patches.shape[1])
+        msg.patches = _arr("B", g.patches, np.uint8)
+    else:
+        msg.patch_size = 0
+    return msg
+
+
+def main(args: list[str] | None = None) -> None:
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = DecoderNode()
+        rclpy.spin(node)
+    except (ValueError, OSError, RuntimeError) as exc:
+        logger = node.get_logger() if node is not None else rclpy.logging.get_logger("decoder")
+        logger.fatal(str(exc))
+        raise SystemExit(1) from None
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if node is not None:
+            node.pipeline.close()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
