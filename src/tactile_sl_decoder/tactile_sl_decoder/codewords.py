@@ -51,6 +51,7 @@ class DecodeParams:
     vote_ratio: float = 0.7         # the winning cell's share of all votes for the glyph
     grow_iterations: int = 3        # passes extending decoded regions to undecided glyphs
     grow_min_agree: int = 2         # decided neighbours that must agree to grow a glyph
+    grow_min_agree_mismatch: int = 4  # ... when its own label contradicts that cell
     min_component: int = 16         # smallest consistent island of decoded glyphs kept
     island_check_px: float = 4.0    # islands near the main region must fit it (x spacing)
     mirrored: bool = False          # cameras see the artwork mirrored (columns reversed)
@@ -433,7 +434,8 @@ class CodewordDecoder:
               values: np.ndarray) -> np.ndarray:
         """Give undecided glyphs the cell implied by agreeing decided neighbours.
 
-        Only if their own label (when known) matches the pattern there and the cell is free.
+        All decided neighbours must agree, the cell must be free, and more of them are needed
+        when the glyph's label is unknown or contradicts the pattern there.
         """
         p, cb = self.params, self.codebook
         _, implied = self._expected(nbr, cell, lay)
@@ -445,8 +447,12 @@ class CodewordDecoder:
         n_any = (imp >= 0).sum(axis=1)
         label_known = lab < cb.symbols
         pattern_val = np.where(top >= 0, values[np.maximum(top, 0)], -1)
-        label_ok = np.where(label_known, pattern_val == lab, n_top >= p.grow_min_agree + 1)
-        ok = undecided & (top >= 0) & (n_top == n_any) & (n_top >= p.grow_min_agree) & label_ok
+        # Agreeing neighbours needed: fewer when the glyph's own label confirms the cell,
+        # more when it is unknown, most when it contradicts it (a misclassified glyph whose
+        # place in the lattice is certain still gets its cell).
+        need = np.where(~label_known, p.grow_min_agree + 1,
+                        np.where(pattern_val == lab, p.grow_min_agree, p.grow_min_agree_mismatch))
+        ok = undecided & (top >= 0) & (n_top == n_any) & (n_top >= need)
         taken = np.zeros(lay.size, dtype=bool)
         taken[cell[cell >= 0]] = True
         ok &= ~taken[np.maximum(top, 0)]

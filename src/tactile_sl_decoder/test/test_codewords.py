@@ -150,7 +150,7 @@ def test_flipped_labels_are_corrected_without_wrong_cells(codebook, rate):
         right = (d.row == R) & (d.col == C)
         assert not np.any(d.decoded & ~right)
         right_total += right.sum()
-    assert right_total / (30 * len(u)) > (0.97 if rate == 0.05 else 0.9)
+    assert right_total / (30 * len(u)) > (0.99 if rate == 0.05 else 0.97)
 
 
 def test_random_labels_decode_nothing(codebook):
@@ -161,16 +161,17 @@ def test_random_labels_decode_nothing(codebook):
         assert _run(dec, lab, u, v).decoded.sum() == 0
 
 
-def test_pasted_pattern_fragment_never_gives_wrong_cells(codebook):
-    """Adversarial: a 3x3 block reads exactly like another place of the pattern."""
+@pytest.mark.parametrize("size", [3, 4])
+def test_pasted_pattern_fragment_never_gives_wrong_cells(codebook, size):
+    """Adversarial: a block reads exactly like another place of the pattern."""
     u, v, R, C = _scene()
     dec = CodewordDecoder(codebook)
     for seed in range(60):
         rng = np.random.default_rng(seed)
         lab = PATTERN.copy()
-        r1, c1 = rng.integers(0, ROWS - 2), rng.integers(0, COLS - 2)
-        r2, c2 = rng.integers(0, ROWS - 2), rng.integers(0, COLS - 2)
-        lab[r1:r1 + 3, c1:c1 + 3] = PATTERN[r2:r2 + 3, c2:c2 + 3]
+        r1, c1 = rng.integers(0, ROWS - size + 1), rng.integers(0, COLS - size + 1)
+        r2, c2 = rng.integers(0, ROWS - size + 1), rng.integers(0, COLS - size + 1)
+        lab[r1:r1 + size, c1:c1 + size] = PATTERN[r2:r2 + size, c2:c2 + size]
         d = _run(dec, lab.reshape(-1), u, v)
         assert not np.any(d.decoded & ~((d.row == R) & (d.col == C)))
 
