@@ -1,0 +1,168 @@
+"""``stereo_camera``: a real stereo camera (two devices or one side-by-side) through OpenCV.
+
+Publishes ``left/image_raw``, ``right/image_raw`` (sensor-data QoS), ``left/camera_info`` and
+``right/camera_info``, all four with one shared stamp per stereo frame. Calibration comes from
+camera_calibration YAML files (``left_camera_info_url`` / ``right_camera_info_url``, e.g.
+written by ``tactile-sl calibrate``). A lost device is logged and reopened; see
+config/stereo_camera.yaml for every parameter.
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image
+
+from ..camera_info import (
+    CameraCalibration,
+    CameraInfoError,
+    camera_info_fields,
+    load_camera_info_yaml,
+)
+from ..images import image_fields
+from ..stereo_capture import CaptureConfig, StereoCapture
+from .camera_common import camera_info_msg, declare, image_msg
+
+
+class StereoCameraNode(Node):
+    """Capture thread -> one stamp per pair -> images and camera_info."""
+
+    def __init__(self) -> None:
+        super().__init__("stereo_camera")
+        cfg = CaptureConfig(
+            left_device=str(declare(self, "left_device", "0",
+                                    "Left camera: index (0), device path or video file/URL.")),
+            right_device=str(declare(self, "right_device", "1",
+                                     "Right camera (ignored when side_by_side).")),
+            side_by_side=bool(declare(self, "side_by_side", False,
+                                      "One device delivering left|right side by side.")),
+            width=int(declare(self, "width", 640, "Width of one camera's image, pixels.")),
+            height=int(declare(self, "height", 480, "Image height, pixels.")),
+            fps=float(declare(self, "fps", 30.0, "Frame rate requested and maximum rate "
+                              "published (video files are paced to it).")),
+            encoding=str(declare(self, "encoding", "mono8", "Output pixel format: mono8 or "
+                                 "bgr8.")),
+            fourcc=str(declare(self, "fourcc", "", "Device pixel format, e.g. MJPG; empty = "
+                               "driver default.")),
+            reopen_interval=float(declare(self, "reopen_interval", 1.0,
+                                          "Seconds between attempts to reopen a lost device.")))
+        self.frame_ids = (
+            str(declare(self, "left_frame_id", "tactile_left_optical_frame",
+                        "frame_id of the left images and camera_info.")),
+            str(declare(self, "right_frame_id", "tactile_right_optical_frame",
+                        "frame_id of the right images and camera_info.")))
+        urls = (str(declare(self, "left_camera_info_url", "", "camera_calibration YAML of the "
+                            "left camera (file://, package:// or a path); empty = uncalibrated.")),
+                str(declare(self, "right_camera_info_url", "", "Same for the right camera.")))
+        self.calibrations = [self._load_info(url, side, cfg)
+                             for url, side in zip(urls, ("left", "right"))]
+        self.capture = StereoCapture(cfg, log=self._log)
+        self.cfg = cfg
+        qos = qos_profile_sensor_data
+        self.pub_images = [self.create_publisher(Image, f"{s}/image_raw", qos)
+                           for s in ("left", "right")]
+        self.pub_infos = [self.create_publisher(CameraInfo, f"{s}/camera_info", qos)
+                          for s in ("left", "right")]
+        self._size_checked = False
+        self.published = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        self.get_logger().info(
+            f"stereo camera: {'side-by-side ' + repr(cfg.left_device) if cfg.side_by_side else f'{cfg.left_device!r} + {cfg.right_device!r}'}"  # noqa: E501
+            f", {cfg.width}x{cfg.height} {cfg.encoding} at up to {cfg.fps:g} fps")
+
+    def _log(self, level: str, text: str) -> None:
+        # one call site per severity: rclpy refuses a severity change at the same call site
+        logger = self.get_logger()
+        if level == "error":
+            logger.error(text)
+        elif level == "warning":
+            logger.warning(text)
+        else:
+            logger.info(text)
+
+    def _load_info(self, url: str, side: str, cfg: CaptureConfig) -> CameraCalibration:
+        if url:
+            try:
+                calib = load_camera_info_yaml(url)
+                self.get_logger().info(f"{side} calibration loaded from {url}")
+                return calib
+            except CameraInfoError as exc:
+                self.get_logger().error(f"{side} calibration not loaded: {exc}; publishing an "
+                                        "uncalibrated CameraInfo")
+        else:
+            self.get_logger().warning(f"{side}_camera_info_url is empty: publishing an "
+                                      "uncalibrated CameraInfo (run tactile-sl calibrate)")
+        return CameraCalibration(cfg.width, cfg.height, np.zeros((3, 3)), np.zeros(5),
+                                 np.eye(3), np.zeros((3, 4)), camera_name=side)
+
+    def _run(self) -> None:
+        period = 1.0 / self.cfg.fps
+        last = 0.0
+        while rclpy.ok() and not self._stop.is_set():
+            try:
+                grab = self.capture.read()
+                if grab is None:
+                    self._stop.wait(0.05)
+                    continue
+                stamp = self.get_clock().now().to_msg()  # one stamp for the whole stereo frame
+                self.publish(grab.left, grab.right, stamp)
+            except Exception as exc:  # keep capturing whatever one frame did
+                self.get_logger().error(f"capture failed: {exc!r}", throttle_duration_sec=5.0)
+                self._stop.wait(0.1)
+            wait = last + period - time.monotonic()
+            if wait > 0:
+                self._stop.wait(wait)
+            last = time.monotonic()
+
+    def publish(self, left: np.ndarray, right: np.ndarray, stamp: object) -> None:
+        if not self._size_checked:
+            for calib, side in zip(self.calibrations, ("left", "right")):
+                if calib.is_calibrated and (calib.width, calib.height) != (left.shape[1],
+                                                                           left.shape[0]):
+                    self.get_logger().warning(
+                        f"{side} calibration is for {calib.width}x{calib.height} but images "
+                        f"are {left.shape[1]}x{left.shape[0]}")
+            self._size_checked = True
+        for i, image in enumerate((left, right)):
+            self.pub_images[i].publish(image_msg(image_fields(image, self.cfg.encoding), stamp,
+                                                 self.frame_ids[i]))
+            info = camera_info_fields(self.calibrations[i], (0, 0), self.frame_ids[i])
+            info["height"], info["width"] = image.shape[0], image.shape[1]
+            self.pub_infos[i].publish(camera_info_msg(info, stamp))
+        self.published += 1
+
+    def destroy_node(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self.capture.close()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run the node until shutdown."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = StereoCameraNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ValueError as exc:  # bad parameters: say so, exit non-zero
+        print(f"stereo_camera: {exc}", flush=True)
+        raise SystemExit(2) from exc
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()
