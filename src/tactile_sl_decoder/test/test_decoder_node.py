@@ -1,0 +1,283 @@
+"""The installed `decoder` node over loopback DDS: bad input is survived, replay == node.
+
+The node runs as its own process (installed executable), on a ROS domain of its own, with
+ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; the test publishes stereo frames from a bundled bag
+and listens for point clouds.
+"""
+import os
+import pathlib
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+REPO = pathlib.Path(__file__).resolve().parents[3]
+EXE = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder" / "decoder"
+BAG = REPO / "bags" / "sphere_deep_small.mcap"
+ARTWORK = REPO / "src" / "tactile_sl_camera" / "artwork" / "pattern.png.yaml"
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def _pattern_file(tmp_path):
+    """Contract pattern YAML of the artwork the bundled bags were rendered from."""
+    meta = yaml.safe_load(ARTWORK.read_text())
+    doc = {"tactile_sl_pattern": 1, "symbols": int(meta["symbols"]),
+           "window": list(meta["window"]), "min_hamming": int(meta["min_hamming"]),
+           "pitch_m": float(meta["pitch_m"]), "primitives": list(meta["primitives"]),
+           "rows": int(meta["rows"]), "cols": int(meta["cols"]), "array": list(meta["array"])}
+    path = tmp_path / "pattern.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+class NodeProcess:
+    """The decoder executable with its output collected line by line."""
+
+    def __init__(self, domain, args):
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain),
+                   ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1",
+                   RCUTILS_LOGGING_BUFFERED_STREAM="0")
+        self.proc = subprocess.Popen([str(EXE), "--ros-args", "-r", "__ns:=/tactile", *args],
+                                     env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True)
+        self.lines = []
+        self._t = threading.Thread(target=self._read, daemon=True)
+        self._t.start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip())
+
+    def wait_for(self, text, timeout=20.0, spin=None):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if any(text in line for line in self.lines):
+                return True
+            if self.proc.poll() is not None:
+                break
+            if spin:
+                spin(0.05)
+            else:
+                time.sleep(0.05)
+        return any(text in line for line in self.lines)
+
+    def stop(self):
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+
+
+@pytest.fixture
+def ros(tmp_path):
+    """rclpy context on a fresh domain + a decoder process on the same domain."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+
+    if not EXE.exists():
+        pytest.fail(f"{EXE} not installed: run `make setup`")
+    domain = 100 + (os.getpid() * 7 + int(time.time() * 1000)) % 100
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = Node("decoder_test", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    procs = []
+
+    def start(*args):
+        p = NodeProcess(domain, ["-p", f"pattern_file:={_pattern_file(tmp_path)}",
+                                 "-p", "warn_period:=0.0", *args])
+        procs.append(p)
+        return p
+
+    yield SimpleRos(node, ex, start)
+    for p in procs:
+        p.stop()
+    ex.shutdown()
+    node.destroy_node()
+    rclpy.shutdown(context=ctx)
+
+
+class SimpleRos:
+    def __init__(self, node, ex, start):
+        self.node, self.ex, self.start = node, ex, start
+
+    def spin(self, seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.ex.spin_once(timeout_sec=min(0.02, max(0.0, end - time.monotonic())))
+
+
+def _bag_messages(limit_frames=2):
+    """(kind, side, rclpy message) of the first frames of the bundled bag, in bag order."""
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from tactile_sl_camera.bag_io import BagReader
+
+    out, stamps = [], []
+    for raw in BagReader(BAG).raw_messages():
+        side = "left" if "/left/" in raw.topic else "right"
+        if raw.topic.endswith("image_raw"):
+            msg = deserialize_message(raw.data, Image)
+            kind = "image"
+        elif raw.topic.endswith("camera_info"):
+            msg = deserialize_message(raw.data, CameraInfo)
+            kind = "info"
+        else:
+            continue
+        t = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if t not in stamps:
+            stamps.append(t)
+        if len(stamps) > limit_frames:
+            break
+        out.append((kind, side, msg))
+    return out
+
+
+def _io(ros):
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+    pubs = {}
+    for side in ("left", "right"):
+        pubs[("image", side)] = ros.node.create_publisher(Image, f"/tactile/{side}/image_raw",
+                                                          qos_profile_sensor_data)
+        pubs[("info", side)] = ros.node.create_publisher(
+            CameraInfo, f"/tactile/{side}/camera_info", qos_profile_sensor_data)
+    clouds = []
+    ros.node.create_subscription(PointCloud2, "/tactile/points", clouds.append, 10)
+    return pubs, clouds
+
+
+def _wait_matched(ros, pubs, timeout=15.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if all(p.get_subscription_count() > 0 for p in pubs.values()):
+            return
+        ros.spin(0.05)
+    pytest.fail("decoder did not subscribe in time")
+
+
+def _stamped(msg, sec, nanosec):
+    import copy
+
+    m = copy.deepcopy(msg)
+    m.header.stamp.sec, m.header.stamp.nanosec = sec, nanosec
+    return m
+
+
+def test_bad_input_is_warned_skipped_and_survived(ros):
+    from sensor_msgs.msg import Image
+
+    proc = ros.start()
+    pubs, clouds = _io(ros)
+    _wait_matched(ros, pubs)
+    msgs = _bag_messages(1)
+    img = {s: m for k, s, m in msgs if k == "image"}
+    info = {s: m for k, s, m in msgs if k == "info"}
+
+    def pair(left, right):
+        pubs[("image", "left")].publish(left)
+        pubs[("image", "right")].publish(right)
+        ros.spin(0.05)
+
+    # 1. no CameraInfo yet (repeated: the first messages may race the discovery)
+    for k in range(10):
+        pair(_stamped(img["left"], 10, k), _stamped(img["right"], 10, k))
+        if proc.wait_for("no CameraInfo received yet", timeout=1.0, spin=ros.spin):
+            break
+    assert proc.wait_for("no CameraInfo received yet", spin=ros.spin), proc.lines
+    # 2. degenerate CameraInfo (all-zero K, as an uncalibrated driver sends)
+    for side in ("left", "right"):
+        bad = _stamped(info[side], 11, 0)
+        bad.k = np.zeros(9)
+        pubs[("info", side)].publish(bad)
+    ros.spin(0.2)
+    pair(_stamped(img["left"], 11, 0), _stamped(img["right"], 11, 0))
+    assert proc.wait_for("not calibrated", spin=ros.spin)
+    # 3. good CameraInfo and a good frame: a cloud, stamped exactly
+    for side in ("left", "right"):
+        pubs[("info", side)].publish(info[side])
+    ros.spin(0.2)
+    pair(_stamped(img["left"], 12, 345), _stamped(img["right"], 12, 345))
+    end = time.monotonic() + 20
+    while not clouds and time.monotonic() < end:
+        ros.spin(0.05)
+    assert clouds and (clouds[-1].header.stamp.sec, clouds[-1].header.stamp.nanosec) == (12, 345)
+    assert clouds[-1].width > 500 and clouds[-1].is_dense
+    # 4. wrong encoding
+    wrong = _stamped(img["left"], 13, 0)
+    wrong.encoding = "16UC1"
+    pair(wrong, _stamped(img["right"], 13, 0))
+    assert proc.wait_for("unsupported image encoding", spin=ros.spin), proc.lines
+    # 5. image size differs from its CameraInfo
+    small = Image()
+    small.header.stamp.sec = 14
+    small.height, small.width, small.encoding, small.step = 240, 320, "mono8", 320
+    small.data = bytes(320 * 240)
+    pair(small, _stamped(img["right"], 14, 0))
+    assert proc.wait_for("320x240", spin=ros.spin)
+    # 6. empty image
+    empty = Image()
+    empty.header.stamp.sec = 15
+    empty.encoding = "mono8"
+    pair(empty, _stamped(img["right"], 15, 0))
+    assert proc.wait_for("empty image", spin=ros.spin)
+    # 7. unsynchronised stereo: stamps that never match
+    pubs[("image", "left")].publish(_stamped(img["left"], 16, 0))
+    ros.spin(0.1)
+    pubs[("image", "right")].publish(_stamped(img["right"], 16, 500_000_000))
+    ros.spin(0.1)
+    pair(_stamped(img["left"], 17, 0), _stamped(img["right"], 17, 0))
+    assert proc.wait_for("no stereo partner", spin=ros.spin)
+    # still alive and still decoding
+    pair(_stamped(img["left"], 18, 0), _stamped(img["right"], 18, 0))
+    end = time.monotonic() + 20
+    while not any(c.header.stamp.sec == 18 for c in clouds) and time.monotonic() < end:
+        ros.spin(0.05)
+    assert proc.proc.poll() is None
+    assert any((c.header.stamp.sec, c.header.stamp.nanosec) == (18, 0) and c.width > 500
+               for c in clouds)
+
+
+def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
+    """`tactile-sl replay` on a bag and the node fed the same frames give identical clouds."""
+    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_decoder.cli import main as cli_main
+
+    out = tmp_path / "out.mcap"
+    assert cli_main(["replay", str(BAG), "-o", str(out), "--no-progress",
+                     "--pattern", str(_pattern_file(tmp_path))]) == 0
+    offline = {}
+    for _raw, msg in BagReader(out).messages(["/tactile/points"]):
+        offline[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = bytes(msg.data)
+    assert len(offline) >= 3
+
+    proc = ros.start()
+    pubs, clouds = _io(ros)
+    _wait_matched(ros, pubs)
+    msgs = _bag_messages(3)
+    frames = {}
+    for kind, side, m in msgs:
+        frames.setdefault((m.header.stamp.sec, m.header.stamp.nanosec), []).append((kind, side, m))
+    for stamp, parts in sorted(frames.items()):
+        for kind, side, m in sorted(parts, key=lambda p: p[0] != "info"):   # info first
+            pubs[(kind, side)].publish(m)
+            ros.spin(0.02)
+        end = time.monotonic() + 20
+        while not any((c.header.stamp.sec, c.header.stamp.nanosec) == stamp for c in clouds) \
+                and time.monotonic() < end:
+            ros.spin(0.05)
+    online = {(c.header.stamp.sec, c.header.stamp.nanosec): bytes(c.data) for c in clouds}
+    assert set(online) == set(frames), proc.lines[-5:]
+    for stamp in online:
+        assert online[stamp] == offline[stamp]
