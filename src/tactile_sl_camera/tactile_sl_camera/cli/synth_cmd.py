@@ -85,7 +85,9 @@ def _benchmark(args: argparse.Namespace, cache: object, bench: object) -> int:
     w, h = renderer.rig.params.width, renderer.rig.params.height
     flat = bench(renderer, args.benchmark, contacts=[])  # type: ignore[operator]
     contact = bench(renderer, args.benchmark)  # type: ignore[operator]
-    print(f"renderer benchmark ({w}x{h}, supersample {renderer.ss}x{renderer.ss}, one process, "
-          f"images + ground truth): no contact {flat:.1f} stereo frames/s, "
-          f"sphere contact {contact:.1f} stereo frames/s")
+    print(f"renderer benchmark: {w}x{h} stereo, supersample {renderer.ss}x{renderer.ss}, images "
+          f"+ ground truth, one thread, {args.benchmark} frames each")
+    for name, (per_wall, per_cpu) in (("no contact", flat), ("sphere contact", contact)):
+        print(f"  {name:15s} {per_cpu:6.1f} stereo frames per CPU second "
+              f"({per_wall:.1f} per wall-clock second)")
     return 0

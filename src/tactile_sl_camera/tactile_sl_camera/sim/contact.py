@@ -124,8 +124,8 @@ class Contact:
         return out
 
     def support(self, pad: PadParams) -> float:
-        """Distance from the core beyond which the displacement is negligible (< 1e-5 d)."""
-        return self.contact_radius() + 3.4 * pad.thickness
+        """Distance from the core beyond which the displacement is negligible (< 0.1 um)."""
+        return self.contact_radius() + 2.6 * pad.thickness
 
 
 @dataclass
@@ -144,8 +144,10 @@ class FieldGrid:
         if self.data is None:
             self.data = np.zeros((self.ny, self.nx, 3))
         self.active_box: tuple[float, float, float, float] | None = None
+        self.active_index: tuple[int, int, int, int] | None = None
         self._data32: np.ndarray | None = None
         self._table32: np.ndarray | None = None
+        self._max: float | None = None
 
     @property
     def xs(self) -> np.ndarray:
@@ -161,6 +163,7 @@ class FieldGrid:
         g = cls(**grid)
         xs, ys = g.xs, g.ys
         box = None
+        idx = None  # union of the contacts' index boxes (iy0, iy1, ix0, ix1)
         for contact in contacts:
             if contact.depth <= 0:
                 continue
@@ -180,10 +183,28 @@ class FieldGrid:
             b = (xs[ix0], ys[iy0], xs[ix1 - 1], ys[iy1 - 1])
             box = b if box is None else (min(box[0], b[0]), min(box[1], b[1]),
                                          max(box[2], b[2]), max(box[3], b[3]))
+            i = (iy0, iy1, ix0, ix1)
+            idx = i if idx is None else (min(idx[0], i[0]), max(idx[1], i[1]),
+                                         min(idx[2], i[2]), max(idx[3], i[3]))
         g.active_box = box
-        gy, gx = np.gradient(g.data[:, :, 2], g.spacing)
-        g.slope = np.stack([gx, gy], axis=-1)
+        g.slope = np.zeros((g.ny, g.nx, 2))
+        if idx is not None:  # the field is exactly zero outside the contacts' boxes
+            iy0, iy1 = max(idx[0] - 1, 0), min(idx[1] + 1, g.ny)
+            ix0, ix1 = max(idx[2] - 1, 0), min(idx[3] + 1, g.nx)
+            idx = (iy0, iy1, ix0, ix1)
+            if iy1 - iy0 >= 2 and ix1 - ix0 >= 2:
+                gy, gx = np.gradient(g.data[iy0:iy1, ix0:ix1, 2], g.spacing)
+                g.slope[iy0:iy1, ix0:ix1] = np.stack([gx, gy], axis=-1)
+        g.active_index = idx
         return g
+
+    @property
+    def table_origin(self) -> tuple[float, float]:
+        """Pad position of :attr:`table32`'s first node (the crop of the active region)."""
+        if self.active_index is None:
+            return self.x0, self.y0
+        return (self.x0 + self.active_index[2] * self.spacing,
+                self.y0 + self.active_index[0] * self.spacing)
 
     @property
     def data32(self) -> np.ndarray:
@@ -193,14 +214,21 @@ class FieldGrid:
 
     @property
     def table32(self) -> np.ndarray:
-        """(ny, nx, 5) float32: ux, uy, uz, duz/dX, duz/dY (one lookup for rendering)."""
+        """float32 ux, uy, uz, duz/dX, duz/dY over the active region (one rendering lookup).
+
+        Zero outside it, as the field is; its first node is at :attr:`table_origin`.
+        """
         if self._table32 is None:
-            self._table32 = np.ascontiguousarray(
-                np.concatenate([self.data, self.slope], axis=2), dtype=np.float32)
+            iy0, iy1, ix0, ix1 = self.active_index or (0, self.ny, 0, self.nx)
+            self._table32 = np.ascontiguousarray(np.concatenate(
+                [self.data[iy0:iy1, ix0:ix1], self.slope[iy0:iy1, ix0:ix1]], axis=2),
+                dtype=np.float32)
         return self._table32
 
     def max_displacement(self) -> float:
-        return float(np.abs(self.data).max()) if self.active_box else 0.0
+        if self._max is None:
+            self._max = float(np.abs(self.data).max()) if self.active_box else 0.0
+        return self._max
 
     def sample(self, X: np.ndarray, Y: np.ndarray, which: str = "data") -> np.ndarray:
         """Exact float64 bilinear interpolation (zero outside the grid): ground truth."""

@@ -96,6 +96,20 @@ class StereoFrame:
     field: FieldGrid
 
 
+def _even_window(win: tuple[slice, slice], h: int, w: int) -> tuple[slice, slice]:
+    """Grow a window by a pixel where needed so both sides are even (for 2x2 blocks)."""
+    out = []
+    for sl, size in zip(win, (h, w)):
+        start, stop = int(sl.start), int(sl.stop)
+        if (stop - start) % 2:
+            if stop < size:
+                stop += 1
+            else:
+                start -= 1
+        out.append(slice(start, stop))
+    return out[0], out[1]
+
+
 class _RayTable:
     """Cached per-camera rays, at pixel centres (casting) and at supersamples (texture)."""
 
@@ -206,25 +220,34 @@ class Renderer:
         win = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
         x0, y0, a, b = table.X0[win], table.Y0[win], table.a[win], table.b[win]
         inv = np.float32(1.0 / fld.spacing)
-        ox, oy = np.float32(fld.x0 / fld.spacing), np.float32(fld.y0 / fld.spacing)
+        tx0, ty0 = fld.table_origin
+        ox, oy = np.float32(tx0 / fld.spacing), np.float32(ty0 / fld.spacing)
         table5 = fld.table32
-        xs, ys = x0, y0
+        xs, ys = x0.copy(), y0.copy()
         tol = 5e-7  # metres (0.02 px; cv2.remap interpolates in 1/32 grid steps)
         self.last_iterations = 0
+        sub = (slice(0, xs.shape[0]), slice(0, xs.shape[1]))  # part still iterating
         for _ in range(self.iterations):
-            u = cv2.remap(table5, xs * inv - ox, ys * inv - oy, cv2.INTER_LINEAR,
+            sx, sy = xs[sub], ys[sub]
+            sa, sb = a[sub], b[sub]
+            u = cv2.remap(table5, sx * inv - ox, sy * inv - oy, cv2.INTER_LINEAR,
                           borderMode=cv2.BORDER_CONSTANT, borderValue=0)
             # Newton step on X - G(X) = 0 with G(X) = X0 + uz(X) (a, b) - (ux, uy)(X); the
             # Jacobian keeps the rank-one height term (the lateral terms are small).
-            rx = x0 + u[:, :, 2] * a - u[:, :, 0] - xs
-            ry = y0 + u[:, :, 2] * b - u[:, :, 1] - ys
+            rx = x0[sub] + u[:, :, 2] * sa - u[:, :, 0] - sx
+            ry = y0[sub] + u[:, :, 2] * sb - u[:, :, 1] - sy
             gx, gy = u[:, :, 3], u[:, :, 4]
-            k = (gx * rx + gy * ry) / np.maximum(1.0 - gx * a - gy * b, np.float32(0.2))
-            xs = xs + rx + a * k
-            ys = ys + ry + b * k
+            k = (gx * rx + gy * ry) / np.maximum(1.0 - gx * sa - gy * sb, np.float32(0.2))
+            sx += rx + sa * k  # in place: sx, sy are views of xs, ys
+            sy += ry + sb * k
             self.last_iterations += 1
-            if max(float(np.abs(rx).max()), float(np.abs(ry).max())) < tol:
+            busy = (np.abs(rx) > tol) | (np.abs(ry) > tol)
+            rows = np.flatnonzero(busy.any(axis=1))
+            if rows.size == 0:
                 break
+            cols = np.flatnonzero(busy.any(axis=0))
+            r0, c0 = sub[0].start, sub[1].start
+            sub = (slice(r0 + rows[0], r0 + rows[-1] + 1), slice(c0 + cols[0], c0 + cols[-1] + 1))
         X[win] = xs
         Y[win] = ys
         return X, Y, win
@@ -293,25 +316,31 @@ class Renderer:
         if win is not None:
             # Supersample positions: exact flat-plane hits plus the (smooth) deformation
             # correction cast at pixel centres, interpolated.
-            dX = X - table.X0
-            dY = Y - table.Y0
+            dX = (X - table.X0) * np.float32(self._tex_ax)  # texture-pixel correction
+            dY = (Y - table.Y0) * np.float32(self._tex_ay)
             if self.ss > 1:
                 dX = cv2.resize(dX, (w * self.ss, h * self.ss), interpolation=cv2.INTER_LINEAR)
                 dY = cv2.resize(dY, (w * self.ss, h * self.ss), interpolation=cv2.INTER_LINEAR)
-            tex_x = tex_x + dX * np.float32(self._tex_ax)
-            tex_y = tex_y + dY * np.float32(self._tex_ay)
-            xs, ys = X[win], Y[win]
+            tex_x = tex_x + dX
+            tex_y = tex_y + dY
+            # Shading varies slowly (surface normals change over the contact's size): it is
+            # computed on 2x2 pixel blocks of the moved window and interpolated back.
+            win = _even_window(win, h, w)
+            wh, ww = X[win].shape
+            xs = cv2.resize(X[win], (ww // 2, wh // 2), interpolation=cv2.INTER_AREA)
+            ys = cv2.resize(Y[win], (ww // 2, wh // 2), interpolation=cv2.INTER_AREA)
             inv = np.float32(1.0 / fld.spacing)
-            mx = xs * inv - np.float32(fld.x0 / fld.spacing)
-            my = ys * inv - np.float32(fld.y0 / fld.spacing)
+            tx0, ty0 = fld.table_origin
+            mx = xs * inv - np.float32(tx0 / fld.spacing)
+            my = ys * inv - np.float32(ty0 / fld.spacing)
             u = cv2.remap(fld.table32, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                           borderValue=0)
-            g = u[..., 3:5]
             P = np.stack([xs + u[..., 0], ys + u[..., 1], u[..., 2]], axis=-1)
-            n = np.stack([g[..., 0], g[..., 1], -np.ones_like(g[..., 0])], axis=-1)
+            n = np.stack([u[..., 3], u[..., 4], -np.ones_like(xs)], axis=-1)
             n /= np.sqrt((n * n).sum(axis=-1, keepdims=True))
             E = E.copy()
-            E[win] = self._irradiance(P, n, nz)
+            E[win] = cv2.resize(self._irradiance(P, n, nz), (ww, wh),
+                                interpolation=cv2.INTER_LINEAR)
         albedo = cv2.remap(self._texture, tex_x, tex_y, cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_CONSTANT, borderValue=1.0)
         if self.ss > 1:
