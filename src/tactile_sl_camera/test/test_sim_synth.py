@@ -141,3 +141,20 @@ def test_bundled_scenes_file_is_valid():
     scenes = load_scenes(pathlib.Path(__file__).resolve().parents[3] / "bags" / "scenes.yaml")
     assert {s.name for s in scenes} == {"no_contact", "sphere_shallow_wide", "sphere_deep_small",
                                         "edge", "two_contacts", "harsh_lighting"}
+
+
+def test_bundled_bags_are_small_complete_and_readable():
+    root = pathlib.Path(__file__).resolve().parents[3] / "bags"
+    bags = sorted(root.glob("*.mcap"))
+    assert {b.stem for b in bags} >= {"no_contact", "sphere_shallow_wide", "sphere_deep_small",
+                                       "edge", "two_contacts", "harsh_lighting"}
+    for bag in bags:
+        assert bag.stat().st_size < 5_000_000, bag
+        with open(bag, "rb") as f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            assert reader.get_header().profile == "ros2"
+            counts = summary.statistics.channel_message_counts
+            topics = {c.topic: counts[cid] for cid, c in summary.channels.items()}
+        assert set(topics) == set(TOPICS), bag
+        assert len(set(topics.values())) == 1  # every topic once per frame
