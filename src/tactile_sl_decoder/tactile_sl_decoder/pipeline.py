@@ -90,7 +90,7 @@ class PipelineParams:
     decode: DecodeParams = field(default_factory=DecodeParams)
     stereo: StereoParams = field(default_factory=StereoParams)
     extraction: Any = None          # tactile_sl_decoder.extraction.ExtractionParams
-    threads: int = 2                # process left and right concurrently (OpenCV/numpy)
+    threads: int = 1                # >1: extract left and right concurrently
 
 
 @dataclass

@@ -50,6 +50,21 @@ def _d(text: str) -> ParameterDescriptor:
     return ParameterDescriptor(description=text)
 
 
+def set_cpu_threads(n: int) -> None:
+    """Intra-op threads of OpenCV and torch (0 = leave the libraries' defaults)."""
+    if n <= 0:
+        return
+    import cv2
+
+    cv2.setNumThreads(n)
+    try:
+        import torch
+
+        torch.set_num_threads(n)
+    except ImportError:
+        pass
+
+
 def stamp_ns(header: Any) -> int:
     """Header stamp as integer nanoseconds (exact)."""
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
@@ -82,8 +97,11 @@ class DecoderNode(Node):
             "Include the glyph patches in symbols_decoded (larger messages)."))
         self.declare_parameter("publish_empty", True, _d(
             "Publish a cloud with no point for frames that decoded nothing."))
-        self.declare_parameter("threads", 2, _d(
+        self.declare_parameter("threads", 1, _d(
             "Worker threads for the two images of a frame (1 = sequential)."))
+        self.declare_parameter("cpu_threads", 1, _d(
+            "Intra-op threads of OpenCV and torch in this process (0 = library defaults); "
+            "1 avoids oversubscription on small shared machines."))
         self.declare_parameter("min_votes", 2, _d(
             "Agreeing window decodes needed before a glyph gets a cell."))
         self.declare_parameter("min_component", 16, _d(
@@ -104,6 +122,7 @@ class DecoderNode(Node):
         params.decode.min_component = int(gp("min_component").value)
         params.stereo.max_reprojection_px = float(gp("max_reprojection_px").value)
         params.threads = int(gp("threads").value)
+        set_cpu_threads(int(gp("cpu_threads").value))
         pattern = PatternSpec.load(str(gp("pattern_file").value) or None)
         classifier = None
         if self.input_mode == "images":

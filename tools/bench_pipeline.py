@@ -1,0 +1,249 @@
+#!/usr/bin/env python3
+"""Benchmarks of the stereo decoding pipeline (figures, not pass/fail tests).
+
+    python tools/bench_pipeline.py                     # in-process timing + accuracy, all bags
+    python tools/bench_pipeline.py --flip 0.05         # robustness: 5 % labels flipped
+    python tools/bench_pipeline.py --ros --rate 30     # through DDS: decoder node at 30 Hz
+
+In-process: median milliseconds per stereo pair with the per-stage breakdown (check,
+extraction, classification, lattice + decoding, stereo), over every frame of the bags,
+and the end-to-end accuracy table (coverage, wrong cells, 3-D error against ground truth).
+
+--flip R: after classification, each known label is flipped to another symbol with
+probability R (same pipeline otherwise); prints coverage and wrong cells with and without.
+
+--ros: starts the installed ``decoder`` executable (own ROS domain, loopback only),
+publishes the bags' stereo frames at --rate Hz for --seconds, each frame stamped with the
+current time, and measures latency from image stamp to point cloud received and the frames
+that produced no cloud.
+"""
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import pathlib
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+
+
+def _bags(args: argparse.Namespace) -> list[str]:
+    bags = args.bags or sorted(glob.glob(str(REPO / "bags" / "*.mcap")))
+    if not bags:
+        sys.exit("no bags: run `make bags` or pass bag paths")
+    return bags
+
+
+def _pipeline(args: argparse.Namespace):
+    from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+
+    params = PipelineParams(threads=args.threads)
+    params.decode.mirrored = args.mirrored
+    return StereoPipeline(PatternSpec.load(args.pattern), None, params)
+
+
+def _set_threads(n: int) -> None:
+    """Intra-op threads of OpenCV and torch (0 = leave their defaults)."""
+    if n <= 0:
+        return
+    import cv2
+
+    cv2.setNumThreads(n)
+    try:
+        import torch
+
+        torch.set_num_threads(n)
+    except ImportError:
+        pass
+
+
+def in_process(args: argparse.Namespace) -> int:
+    """Per-stage timing over all frames, and the accuracy table."""
+    from tactile_sl_camera.images import to_gray
+    from tactile_sl_decoder.e2e_metrics import aggregate, format_table, frame_metrics
+    from tactile_sl_decoder.pipeline import bag_frames
+
+    _set_threads(args.cpu_threads)
+    pipe = _pipeline(args)
+    stages = ("check", "extract", "classify", "decode", "stereo", "total")
+    timings: dict[str, list[float]] = {s: [] for s in stages}
+    tables = []
+    glyphs = []
+    for bag in _bags(args):
+        frames = list(bag_frames(bag))
+        metrics = []
+        for fr in frames:
+            left, right = to_gray(fr.left_image), to_gray(fr.right_image)
+            for rep in range(args.warmup + args.repeat):
+                res = pipe.process(left, right, fr.left_info, fr.right_info)
+                if rep >= args.warmup:
+                    for s in stages:
+                        timings[s].append(res.timings_ms.get(s, 0.0))
+            glyphs.append(len(res.left) + len(res.right))
+            if fr.ground_truth is not None:
+                metrics.append(frame_metrics(res.points, fr.ground_truth,
+                                             0.5 * pipe.pattern.pitch_m, fr.stamp_ns))
+        if metrics:
+            tables.append(aggregate(pathlib.Path(bag).stem, metrics))
+    print(f"in-process, {len(timings['total'])} stereo pairs (median glyphs per pair "
+          f"{int(np.median(glyphs))}), threads={args.threads}, cpu_threads={args.cpu_threads}, "
+          f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+    print(f"{'stage':<10} {'median ms':>10} {'p90 ms':>8} {'min ms':>8}")
+    for s in stages:
+        v = np.asarray(timings[s])
+        print(f"{s:<10} {np.median(v):>10.2f} {np.percentile(v, 90):>8.2f} {v.min():>8.2f}")
+    if tables:
+        print()
+        format_table(tables)
+    pipe.close()
+    return 0
+
+
+def flips(args: argparse.Namespace) -> int:
+    """Coverage and wrong cells with and without random label flips."""
+    from tactile_sl_decoder.e2e_metrics import evaluate_bag, flip_labels_hook
+
+    _set_threads(args.cpu_threads)
+    pipe = _pipeline(args)
+    print(f"label-flip robustness: {100 * args.flip:.1f} % of known labels flipped after "
+          f"classification (seed {args.seed})")
+    print(f"{'bag':<24} {'coverage':>9} {'flipped':>9} {'drop pts':>9} {'wrong':>6} "
+          f"{'wrong flipped':>14} {'wrong%':>7}")
+    worst = 0.0
+    for bag in _bags(args):
+        _, base = evaluate_bag(bag, pipe)
+        _, flip = evaluate_bag(bag, pipe, label_hook=flip_labels_hook(args.flip, 3, args.seed))
+        drop = 100 * (base.coverage - flip.coverage)
+        worst = max(worst, drop)
+        print(f"{base.name:<24} {100 * base.coverage:>8.2f}% {100 * flip.coverage:>8.2f}% "
+              f"{drop:>9.2f} {base.wrong:>6} {flip.wrong:>14} {100 * flip.wrong_rate:>6.3f}%")
+    print(f"largest coverage drop: {worst:.2f} points")
+    pipe.close()
+    return 0
+
+
+def through_ros(args: argparse.Namespace) -> int:
+    """Decoder node fed at a fixed rate over loopback DDS: drops and latency."""
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.qos import qos_profile_sensor_data
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+    from tactile_sl_camera.bag_io import BagReader
+
+    exe = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder" / "decoder"
+    domain = 150 + os.getpid() % 50
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    cmd = [str(exe), "--ros-args", "-r", "__ns:=/tactile", "-p", f"threads:={args.threads}",
+           "-p", f"cpu_threads:={args.cpu_threads}", "-p", "publish_symbols:=false"]
+    if args.pattern:
+        cmd += ["-p", f"pattern_file:={args.pattern}"]
+    frames = []   # (left image, right image, left info, right info)
+    for bag in _bags(args):
+        parts: dict[tuple[int, int], dict[str, object]] = {}
+        for raw in BagReader(bag).raw_messages():
+            side = "left" if "/left/" in raw.topic else "right"
+            if raw.topic.endswith("image_raw"):
+                m = deserialize_message(raw.data, Image)
+                key = "img_" + side
+            elif raw.topic.endswith("camera_info"):
+                m = deserialize_message(raw.data, CameraInfo)
+                key = "info_" + side
+            else:
+                continue
+            parts.setdefault((m.header.stamp.sec, m.header.stamp.nanosec), {})[key] = m
+        frames += [p for _, p in sorted(parts.items()) if len(p) == 4]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    rclpy.init(domain_id=domain)
+    node = Node("bench_pipeline")
+    pubs = {k: node.create_publisher(Image if k.startswith("img") else CameraInfo,
+                                     f"/tactile/{k.split('_')[1]}/"
+                                     f"{'image_raw' if k.startswith('img') else 'camera_info'}",
+                                     qos_profile_sensor_data)
+            for k in ("img_left", "img_right", "info_left", "info_right")}
+    received: dict[int, float] = {}
+    widths: list[int] = []
+
+    def on_cloud(msg: PointCloud2) -> None:
+        received[msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec] = time.time()
+        widths.append(msg.width)
+
+    node.create_subscription(PointCloud2, "/tactile/points", on_cloud, 50)
+    try:
+        end = time.monotonic() + 60
+        while time.monotonic() < end and not all(
+                p.get_subscription_count() for p in pubs.values()):
+            rclpy.spin_once(node, timeout_sec=0.05)
+        # Warm-up frames (imports, first allocations) are not measured.
+        sent: list[int] = []
+        period = 1.0 / args.rate
+        n_total = int(args.seconds * args.rate)
+        t_next = time.monotonic() + 0.5
+        for i in range(args.warmup_frames + n_total):
+            fr = frames[i % len(frames)]
+            while time.monotonic() < t_next:
+                rclpy.spin_once(node, timeout_sec=max(0.0, t_next - time.monotonic()))
+            t_next += period
+            now = time.time_ns()
+            stamp = (now // 10**9, now % 10**9)
+            for key in ("info_left", "info_right", "img_left", "img_right"):
+                m = fr[key]
+                m.header.stamp.sec, m.header.stamp.nanosec = stamp
+                pubs[key].publish(m)
+            if i >= args.warmup_frames:
+                sent.append(now)
+        drain = time.monotonic() + 2.0
+        while time.monotonic() < drain:
+            rclpy.spin_once(node, timeout_sec=0.05)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+        proc.terminate()
+        proc.wait(10)
+    lat = np.array([1e3 * (received[s] - s / 1e9) for s in sent if s in received])
+    dropped = sum(1 for s in sent if s not in received)
+    print(f"through ROS (loopback DDS): {len(sent)} stereo frames at {args.rate:.0f} Hz, "
+          f"threads={args.threads}, cpu_threads={args.cpu_threads}, load average "
+          f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+    print(f"clouds received {len(lat)}, frames without a cloud (dropped) {dropped}")
+    if len(lat):
+        print(f"latency stamp -> cloud received: median {np.median(lat):.1f} ms, "
+              f"p99 {np.percentile(lat, 99):.1f} ms, max {lat.max():.1f} ms; "
+              f"median points per cloud {int(np.median(widths))}")
+    return 0
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("bags", nargs="*", help="bags (default: bags/*.mcap)")
+    p.add_argument("--pattern", default=None, help="pattern YAML (default: the shipped one)")
+    p.add_argument("--mirrored", action="store_true")
+    p.add_argument("--threads", type=int, default=1,
+                   help="pipeline worker threads for the two images (default 1)")
+    p.add_argument("--cpu-threads", type=int, default=1,
+                   help="OpenCV / torch intra-op threads (0 = library defaults)")
+    p.add_argument("--repeat", type=int, default=3, help="timed runs per frame")
+    p.add_argument("--warmup", type=int, default=1, help="untimed runs per frame first")
+    p.add_argument("--flip", type=float, default=0.0, help="label-flip robustness run")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--ros", action="store_true", help="measure through the ROS graph")
+    p.add_argument("--rate", type=float, default=30.0, help="--ros input rate, Hz")
+    p.add_argument("--seconds", type=float, default=10.0, help="--ros measured duration")
+    p.add_argument("--warmup-frames", type=int, default=10, help="--ros unmeasured frames")
+    args = p.parse_args()
+    if args.ros:
+        return through_ros(args)
+    if args.flip > 0:
+        return flips(args)
+    return in_process(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
