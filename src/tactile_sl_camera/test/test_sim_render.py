@@ -176,6 +176,7 @@ def test_glyph_spacing_and_coverage(renderer):
     d = [np.linalg.norm(truth.px_left[i] - truth.px_left[idx[(r, c + 1)]])
          for i, (r, c) in enumerate(zip(truth.rows, truth.cols)) if v[i] and (r, c + 1) in idx]
     assert 16 <= np.median(d) <= 20
+    assert v.sum() >= 600  # the pattern fills most of both images
 
 
 def test_missing_artwork_is_a_clear_error(tmp_path):
@@ -187,3 +188,18 @@ def test_missing_artwork_is_a_clear_error(tmp_path):
     (tmp_path / "a.png.yaml").write_text("cell00_px: [1, 1]\npitch_px: 5\n")
     with pytest.raises(ArtworkError, match="missing key"):
         load_artwork(tmp_path / "a.png")
+
+
+def test_artwork_drawn_mirrored_is_read_through_its_sidecar(tmp_path, artwork_path):
+    import yaml
+
+    png = cv2.imread(str(artwork_path), cv2.IMREAD_GRAYSCALE)
+    meta = yaml.safe_load(artwork_path.with_name(artwork_path.name + ".yaml").read_text())
+    flipped = tmp_path / "flipped.png"
+    cv2.imwrite(str(flipped), png[:, ::-1])
+    meta["cell00_px"] = [png.shape[1] - 1 - meta["cell00_px"][0], meta["cell00_px"][1]]
+    meta["mirrored"] = True
+    flipped.with_name("flipped.png.yaml").write_text(yaml.safe_dump(meta))
+    plain = Renderer(load_artwork(artwork_path), supersample=1).render([], seed=2)
+    read = Renderer(load_artwork(flipped), supersample=1).render([], seed=2)
+    assert np.abs(plain.left.astype(int) - read.left.astype(int)).max() <= 1
