@@ -53,12 +53,20 @@ class ExtractionParams:
     """Regions below this fraction of the typical glyph area are noise."""
     split_ratio: float = 1.55
     """A region of at least this many typical areas holds two linked glyphs ..."""
-    triple_ratio: float = 2.5
+    triple_ratio: float = 2.3
     """... of at least this many, three ..."""
-    max_area_ratio: float = 3.6
+    max_area_ratio: float = 5.0
     """... and one above this many is no glyph (shadow, smear, pad edge) and is dropped."""
     split_iterations: int = 3
     """Nearest-seed reassignments refining the centres of split regions."""
+    min_split_distance: float = 0.45
+    """Parts of a split region closer than this many spacings are one glyph fewer (an ink
+    bridge or a swollen glyph inflated the area, not an extra glyph)."""
+    core_radius: float = 0.2
+    """Radius, in spacings, of the disc around a split part's centre that must be inked ..."""
+    min_core_fill: float = 0.7
+    """... to at least this fraction, else the part is a bridge and the region one glyph fewer
+    (0 disables the check)."""
     reject_border: bool = True
     """Drop regions touching the image border: their centroid is that of a cut glyph."""
     patch_size: int = PATCH_SIZE
@@ -150,8 +158,12 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
     area = [pixels[single]]
     multi = np.flatnonzero(glyphs >= 2)
     if len(multi):
+        # preliminary spacing from the single glyphs: splits closer than a fraction of it
+        # are not two glyphs
+        pre = _median_nn(centroids[single]) if len(single) >= 2 else 0.0
         su, sv, sa = split_regions(labels, stats[multi], multi, glyphs[multi],
-                                   params.split_iterations)
+                                   params.split_iterations, params.min_split_distance * pre,
+                                   params.core_radius * pre, params.min_core_fill)
         u.append(su)
         v.append(sv)
         area.append(sa)
@@ -170,6 +182,14 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
         uu[:ns] += du * step[:ns]
         vv[:ns] += dv * step[:ns]
     return Detections(uu, vv, aa, spacing, patches, local)
+
+
+def _median_nn(points: np.ndarray, sample: int = 256) -> float:
+    """Median nearest-neighbour distance of (a fixed subsample of) points."""
+    tree = cKDTree(points)
+    probe = points[:: max(1, len(points) // sample)]
+    dist, _ = tree.query(probe, k=2)
+    return float(np.median(dist[:, 1]))
 
 
 def patch_centroid_offset(patches: np.ndarray, dark: bool = True,
@@ -195,14 +215,18 @@ def patch_centroid_offset(patches: np.ndarray, dark: bool = True,
 
 
 def split_regions(labels: np.ndarray, stats: np.ndarray, ids: np.ndarray, k: np.ndarray,
-                  iterations: int = 3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  iterations: int = 3, min_separation_px: float = 0.0,
+                  core_radius_px: float = 0.0, min_core_fill: float = 0.7
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centres of the k glyphs in each linked region, from its moments (all regions at once).
 
     Seeds lie on the major axis (orientation from the second-order central moments) through
     the centroid (m10/m00, m01/m00). For k equal blobs spaced d apart on a line, the variance
     along the axis exceeds the across-axis variance by d^2/4 (k = 2) or 2 d^2/3 (k = 3),
     which gives d; nearest-seed reassignment of the pixels then corrects for unequal glyph
-    shapes and bent chains. Returns centres and the pixel count of each part.
+    shapes and bent chains. A region whose parts end up closer than ``min_separation_px``
+    (a pair plus a long ink bridge counted as three by its area, a swollen single glyph
+    counted as two) is split into one glyph fewer. Returns centres and part pixel counts.
     """
     n = len(ids)
     x0 = stats[:, cv2.CC_STAT_LEFT].astype(np.int64)
@@ -226,26 +250,47 @@ def split_regions(labels: np.ndarray, stats: np.ndarray, ids: np.ndarray, k: np.
     mu11 = np.bincount(r, dx * dy, minlength=n) / m00
     theta = 0.5 * np.arctan2(2.0 * mu11, mu20 - mu02)
     spread = 2.0 * np.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11 ** 2)  # lambda_max - lambda_min
-    step = np.where(k == 2, 2.0 * np.sqrt(spread), np.sqrt(1.5 * spread))
-    # seed j of region i at offset (j - (k-1)/2) * step along the axis; 3 slots, unused = inf
+    k = np.asarray(k, np.int64).copy()
     slots = np.arange(3, dtype=np.float64)
-    offset = (slots[None, :] - (k[:, None] - 1) / 2.0) * step[:, None]
-    valid = slots[None, :] < k[:, None]
-    seed_u = np.where(valid, cu[:, None] + offset * np.cos(theta)[:, None], np.inf)
-    seed_v = np.where(valid, cv[:, None] + offset * np.sin(theta)[:, None], np.inf)
-    slot = r * 3
-    for _ in range(max(1, iterations)):  # a fixed few passes over all regions' pixels
-        d2 = (px[:, None] - seed_u[r]) ** 2 + (py[:, None] - seed_v[r]) ** 2
-        slot = r * 3 + np.argmin(d2, axis=1)
-        sums = np.bincount(slot, minlength=3 * n).reshape(n, 3).astype(np.float64)
-        su = np.bincount(slot, px, minlength=3 * n).reshape(n, 3)
-        sv = np.bincount(slot, py, minlength=3 * n).reshape(n, 3)
-        ok = valid & (sums > 0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            seed_u = np.where(ok, su / sums, seed_u)
-            seed_v = np.where(ok, sv / sums, seed_v)
+    for _ in range(3):  # at most two reductions of k (3 -> 2 -> 1)
+        step = np.where(k == 3, np.sqrt(1.5 * spread), 2.0 * np.sqrt(spread))
+        # seed j of region i at offset (j - (k-1)/2) * step on the axis; unused slots = inf
+        offset = (slots[None, :] - (k[:, None] - 1) / 2.0) * step[:, None]
+        valid = slots[None, :] < k[:, None]
+        seed_u = np.where(valid, cu[:, None] + offset * np.cos(theta)[:, None], np.inf)
+        seed_v = np.where(valid, cv[:, None] + offset * np.sin(theta)[:, None], np.inf)
+        slot = r * 3
+        for _ in range(max(1, iterations)):  # a fixed few passes over all regions' pixels
+            d2 = (px[:, None] - seed_u[r]) ** 2 + (py[:, None] - seed_v[r]) ** 2
+            slot = r * 3 + np.argmin(d2, axis=1)
+            sums = np.bincount(slot, minlength=3 * n).reshape(n, 3).astype(np.float64)
+            su = np.bincount(slot, px, minlength=3 * n).reshape(n, 3)
+            sv = np.bincount(slot, py, minlength=3 * n).reshape(n, 3)
+            ok = valid & (sums > 0)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                seed_u = np.where(ok, su / sums, seed_u)
+                seed_v = np.where(ok, sv / sums, seed_v)
+        # closest two parts of each region (inf - inf pairs of unused slots -> nan -> ignored)
+        with np.errstate(invalid="ignore"):
+            gaps = np.stack([np.hypot(seed_u[:, a] - seed_u[:, b], seed_v[:, a] - seed_v[:, b])
+                             for a, b in ((0, 1), (0, 2), (1, 2))], axis=1)
+        closest = np.nanmin(np.where(np.isfinite(gaps), gaps, np.nan), axis=1,
+                            initial=np.inf) if n else np.zeros(0)
+        fewer = (k > 1) & (closest < min_separation_px)
+        if core_radius_px > 0:
+            # a glyph has solid ink around its centre; a part centred on a thin bridge does not
+            d2 = (px[:, None] - seed_u[r]) ** 2 + (py[:, None] - seed_v[r]) ** 2
+            near = d2 < core_radius_px ** 2
+            hits = np.bincount((r[:, None] * 3 + slots[None, :].astype(np.int64))[near],
+                               minlength=3 * n).reshape(n, 3)
+            fill = hits / (np.pi * core_radius_px ** 2)
+            hollow = (valid & (fill < min_core_fill)).any(axis=1)
+            fewer |= (k > 1) & hollow
+        if not fewer.any():
+            break
+        k[fewer] -= 1
     counts = np.bincount(slot, minlength=3 * n).reshape(n, 3).astype(np.float64)
-    ok = valid & (counts > 0)
+    ok = (slots[None, :] < k[:, None]) & (counts > 0)
     return seed_u[ok], seed_v[ok], counts[ok]
 
 

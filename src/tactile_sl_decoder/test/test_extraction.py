@@ -1,0 +1,153 @@
+"""Glyph extraction on synthetic images with exact ground truth."""
+import cv2
+import numpy as np
+import pytest
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from tactile_sl_decoder.extraction import (
+    PATCH_SIZE,
+    Detections,
+    ExtractionParams,
+    estimate_spacing,
+    extract_symbols,
+    sample_patches,
+    threshold_ink,
+)
+from tactile_sl_decoder.synth_glyphs import finish, render_at, synth_image
+
+
+def _match(det: Detections, u: np.ndarray, v: np.ndarray, spacing: float):
+    dist, _ = cKDTree(np.column_stack((det.u, det.v))).query(np.column_stack((u, v)))
+    back, _ = cKDTree(np.column_stack((u, v))).query(np.column_stack((det.u, det.v)))
+    return dist, back
+
+
+@pytest.mark.parametrize("seed,spacing", [(0, 15.0), (1, 18.0), (2, 22.0)])
+def test_grid_recall_accuracy_and_spacing(seed, spacing):
+    img = synth_image(np.random.default_rng(seed), spacing=spacing)
+    det = extract_symbols(img.gray)
+    dist, back = _match(det, img.u, img.v, spacing)
+    assert (dist < 0.25 * spacing).mean() >= 0.99
+    assert np.median(dist) < 0.1  # px: grey-weighted centroids are sub-pixel accurate
+    # detections near the truth's region that match nothing would be spurious
+    inside = ((det.u > img.u.min()) & (det.u < img.u.max()) & (det.v > img.v.min())
+              & (det.v < img.v.max()))
+    assert (back[inside] >= 0.25 * spacing).sum() <= 0.01 * inside.sum()
+    # warp changes scale by up to ~10 %: the median spacing stays close to nominal
+    assert abs(det.spacing_px - spacing) < 0.12 * spacing
+    assert det.u.dtype == np.float32 and det.v.dtype == np.float32
+    assert det.area.dtype == np.float32 and len(det.area) == len(det)
+    assert det.patches.shape == (len(det), PATCH_SIZE, PATCH_SIZE)
+    assert det.patches.dtype == np.uint8
+
+
+def _touching_groups(sep: float, spacing: float, seed: int):
+    """A sparse grid of single glyphs plus pairs and triples whose glyphs touch."""
+    rng = np.random.default_rng(seed)
+    shape = (480, 640)
+    gy, gx = np.mgrid[1:480 // int(spacing), 1:640 // int(spacing)]
+    grid = np.column_stack([gx.ravel() * spacing, gy.ravel() * spacing])
+    free = np.ones(len(grid), bool)
+    layouts = {"pair_h": [(0, 0), (1, 0)], "pair_v": [(0, 0), (0, 1)],
+               "pair_diag": [(0, 0), (0.7, 0.7)], "triple_h": [(-1, 0), (0, 0), (1, 0)],
+               "triple_v": [(0, -1), (0, 0), (0, 1)], "triple_l": [(0, 0), (1, 0), (1, 1)]}
+    groups = []
+    for i, (_, offsets) in enumerate(list(layouts.items()) * 3):
+        cx = (4 + 5 * (i % 6)) * spacing
+        cy = (4 + 5 * (i // 6)) * spacing
+        if cx > 600 or cy > 440:
+            continue
+        free &= np.hypot(grid[:, 0] - cx, grid[:, 1] - cy) > 2.2 * spacing
+        groups.append(np.array([(cx + a * sep * spacing, cy + b * sep * spacing)
+                                for a, b in offsets]))
+    centres = np.vstack([grid[free], *groups])
+    cover = render_at(centres, rng.integers(0, 3, len(centres)), spacing, shape)
+    for g in groups:  # a thin ink link guarantees contact whatever the shapes
+        for a, b in zip(g[:-1], g[1:]):
+            line = np.zeros(shape, np.uint8)
+            cv2.line(line, tuple(int(8 * x) for x in a), tuple(int(8 * x) for x in b), 255, 1,
+                     lineType=cv2.LINE_AA, shift=3)
+            cover = np.maximum(cover, line.astype(np.float32) / 255.0)
+    gray = finish(cover, rng, blur=0.9, noise=2.0, gradient=0.2)
+    labels, _ = ndimage.label(threshold_ink(gray, ExtractionParams()) > 0,
+                              structure=np.ones((3, 3)))
+    for g in groups:  # the premise of the test: every group is one blob for the extractor
+        ids = {labels[int(round(y)), int(round(x))] for x, y in g}
+        assert len(ids) == 1 and 0 not in ids
+    return gray, centres, groups
+
+
+@pytest.mark.parametrize("sep,spacing,seed", [(0.55, 18.0, 0), (0.6, 22.0, 1),
+                                              (0.7, 16.0, 2), (0.6, 14.0, 3)])
+def test_linked_pairs_and_triples_are_split(sep, spacing, seed):
+    gray, centres, groups = _touching_groups(sep, spacing, seed)
+    det = extract_symbols(gray)
+    tree = cKDTree(np.column_stack((det.u, det.v)))
+    for g in groups:
+        dist, idx = tree.query(g)
+        assert (dist < 0.25 * spacing).all(), (g, dist / spacing)
+        assert len(set(idx.tolist())) == len(g)  # one detection per glyph, not shared
+    back, _ = cKDTree(centres).query(np.column_stack((det.u, det.v)))
+    assert (back >= 0.25 * spacing).sum() == 0  # no phantom glyph between linked ones
+    assert len(det) == len(centres)
+
+
+def test_blank_and_degenerate_images():
+    for gray in (np.full((480, 640), 128, np.uint8), np.zeros((0, 0), np.uint8),
+                 np.zeros((5, 5), np.uint8)):
+        det = extract_symbols(gray)
+        assert len(det) == 0 and det.patches.shape == (0, PATCH_SIZE, PATCH_SIZE)
+        assert det.spacing_px == 0.0
+    with pytest.raises(ValueError):
+        extract_symbols(np.zeros((10, 10), np.float32))
+    with pytest.raises(ValueError):
+        extract_symbols(np.zeros((10, 10, 3), np.uint8))
+
+
+def test_bright_glyphs_with_inverted_polarity():
+    img = synth_image(np.random.default_rng(3), spacing=18.0)
+    det = extract_symbols(255 - img.gray, ExtractionParams(dark_glyphs=False))
+    dist, _ = _match(det, img.u, img.v, 18.0)
+    assert (dist < 0.25 * 18.0).mean() >= 0.99
+
+
+def test_patch_scale_follows_spacing():
+    """The same glyphs at 14 and 26 px spacing give patches with the same ink share."""
+    shares = []
+    for spacing in (14.0, 26.0):
+        img = synth_image(np.random.default_rng(4), spacing=spacing, warp_strength=0.0,
+                          blur=0.6, noise=1.0, gradient=0.0)
+        det = extract_symbols(img.gray)
+        p = det.patches.reshape(len(det), -1).astype(np.float32)
+        dark = p < (p.max(axis=1, keepdims=True) + p.min(axis=1, keepdims=True)) / 2
+        shares.append(dark.mean())
+        assert abs(np.median(det.local_spacing) - spacing) < 0.1 * spacing
+    assert abs(shares[0] - shares[1]) < 0.15 * shares[0]
+
+
+def test_sample_patches_centre_and_border():
+    gray = np.zeros((40, 60), np.uint8)
+    gray[20, 30] = 255
+    p = sample_patches(gray, np.array([30.0, 0.0], np.float32), np.array([20.0, 0.0],
+                                                                         np.float32),
+                       np.array([1.0, 1.0], np.float32))
+    assert p.shape == (2, PATCH_SIZE, PATCH_SIZE)
+    # 18 px patch centred on a pixel: the centre lies between patch pixels 8 and 9
+    assert p[0, 8:10, 8:10].sum() > 0 and p[0].sum() == p[0, 8:10, 8:10].sum()
+    many = sample_patches(gray, np.full(2000, 30.0, np.float32), np.full(2000, 20.0,
+                                                                         np.float32),
+                          np.ones(2000, np.float32))  # more than one remap chunk
+    assert (many == p[0]).all()
+
+
+def test_spacing_estimate_on_a_lattice():
+    gy, gx = np.mgrid[0:20, 0:30]
+    u = (gx.ravel() * 17.0).astype(np.float32)
+    v = (gy.ravel() * 17.0).astype(np.float32)
+    spacing, local = estimate_spacing(u, v, search_px=25.0)
+    assert spacing == pytest.approx(17.0, abs=1e-3)
+    assert np.allclose(local, 17.0, atol=1e-3)
+    spacing2, local2 = estimate_spacing(u, v)  # k-nearest path
+    assert spacing2 == pytest.approx(17.0, abs=1e-3) and np.allclose(local2, 17.0, atol=1e-3)
+    assert estimate_spacing(u[:1], v[:1])[0] == 0.0
