@@ -179,7 +179,8 @@ def dump_pattern(pattern: Pattern) -> str:
             flow = yaml.safe_dump(value, default_flow_style=True, width=4096).strip()
             lines.append(f"{key}: {flow}")
         else:
-            lines.append(yaml.safe_dump({key: value}, sort_keys=False, default_flow_style=None,
+            flow = None if isinstance(value, (dict, list)) else False
+            lines.append(yaml.safe_dump({key: value}, sort_keys=False, default_flow_style=flow,
                                         width=4096).rstrip("\n"))
     return "\n".join(lines) + "\n"
 

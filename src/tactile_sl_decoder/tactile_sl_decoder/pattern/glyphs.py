@@ -69,7 +69,7 @@ class Glyph:
             out.append(f'<polygon points="{pts}"/>')
         if self.holes:
             # ring: outer circle minus inner circle via even-odd path
-            for (dx, dy, r_out), (hx, hy, r_in) in zip(self.discs, self.holes):
+            for (dx, dy, r_out), (_hx, _hy, r_in) in zip(self.discs, self.holes):
                 out.append(_svg_annulus(cx_mm + dx * pitch_mm, cy_mm + dy * pitch_mm,
                                         r_out * pitch_mm, r_in * pitch_mm))
         else:

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..constraints import Constraints
 from .base import Budget, GenerationFailed, GenerationResult
-from .steps import StepFiller, check_size, progress_line
+from .steps import StepFiller, check_size, progress_line, rows_complete
 
 NAME = "fill-and-test"
 
@@ -39,11 +39,13 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
         if done == total:
             budget.done()
             return GenerationResult(filler.array.copy(), NAME, seed, budget.elapsed(),
-                                    {"restarts": restarts, "windows": total})
+                                    {"restarts": restarts, "windows": total,
+                                     "best_rows": rows})
         if budget.expired_now():
             budget.done()
             raise GenerationFailed(
                 f"time limit reached after {restarts} restarts; best attempt placed "
                 f"{best} of {total} windows",
-                {"restarts": restarts, "best_windows": best, "windows": total})
+                {"restarts": restarts, "best_windows": best, "windows": total,
+                 "best_rows": rows_complete(best, rows, cols, constraints.window)})
         restarts += 1

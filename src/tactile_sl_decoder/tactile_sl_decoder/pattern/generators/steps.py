@@ -108,3 +108,15 @@ def check_size(constraints: Constraints, rows: int, cols: int) -> None:
 def progress_line(budget: Budget, placed: int, total: int, restarts: int, best: int) -> None:
     """Common progress display: windows placed now, best so far, restarts."""
     budget.report(f"windows {placed}/{total} (best {best}) restarts {restarts}")
+
+
+def rows_complete(done: int, rows: int, cols: int, window: tuple[int, int]) -> int:
+    """How many leading full-width rows the first ``done`` Morano steps have filled."""
+    m, n = window
+    strip = 1 + (cols - n)
+    first_cols = strip + (rows - m)
+    if done < strip:
+        return 0
+    if done < first_cols or cols == n:
+        return min(rows, m + (done - strip) if cols == n else m)
+    return min(rows, m + (done - first_cols) // (cols - n))
