@@ -1,0 +1,120 @@
+"""Classifier: fast path equals torch, weights loading is strict, shipped weights work."""
+import numpy as np
+import pytest
+import torch
+
+from tactile_sl_decoder.classifier import (
+    DEFAULT_THRESHOLD,
+    FORMAT,
+    FORMAT_VERSION,
+    LABEL_UNKNOWN,
+    Classifier,
+    ClassifierError,
+    FastLeNet,
+    default_weights_path,
+)
+from tactile_sl_decoder.extraction import extract_symbols
+from tactile_sl_decoder.model import ARCH, GlyphNet, standardise
+from tactile_sl_decoder.synth_glyphs import synth_image
+from tactile_sl_decoder.training import label_detections, save_blob
+
+
+def _blob(model: GlyphNet, **over):
+    blob = {"format": FORMAT, "version": FORMAT_VERSION, "arch": ARCH, "classes": 3,
+            "primitives": ["line", "circle", "triangle"], "threshold": 0.9,
+            "state_dict": {k: v.clone() for k, v in model.state_dict().items()}, "meta": {}}
+    blob.update(over)
+    return blob
+
+
+@pytest.mark.parametrize("classes,n", [(3, 257), (5, 1), (3, 0)])
+def test_fast_path_matches_torch(classes, n):
+    torch.manual_seed(classes)
+    model = GlyphNet(classes).eval()
+    with torch.no_grad():  # larger weights than init so that every layer matters
+        for p in model.parameters():
+            p.mul_(3.0)
+    patches = np.random.default_rng(n).integers(0, 256, (n, 18, 18), dtype=np.uint8)
+    with torch.no_grad():
+        ref = model(standardise(torch.from_numpy(patches))).numpy() if n else np.zeros((0,))
+    fast = FastLeNet.from_state({k: v.numpy() for k, v in model.state_dict().items()})
+    out = fast.logits(patches)
+    assert out.shape == (n, classes)
+    if n:
+        assert np.abs(out - ref).max() < 1e-4 * max(1.0, np.abs(ref).max())
+
+
+def test_load_roundtrip_and_threshold(tmp_path):
+    model = GlyphNet(3).eval()
+    path = tmp_path / "w.pt"
+    save_blob(_blob(model), path)
+    clf = Classifier.load(path)
+    assert clf.classes == 3 and clf.threshold == 0.9
+    patches = np.random.default_rng(0).integers(0, 256, (50, 18, 18), dtype=np.uint8)
+    prob = clf.probabilities(patches)
+    assert prob.shape == (50, 3) and np.allclose(prob.sum(axis=1), 1.0, atol=1e-5)
+    label, conf = clf.predict(patches)
+    assert label.dtype == np.uint8 and conf.dtype == np.float32
+    assert np.allclose(conf, prob.max(axis=1))
+    assert ((label == LABEL_UNKNOWN) == (conf < 0.9)).all()
+    never = Classifier.load(path, threshold=1.01)
+    assert (never.predict(patches)[0] == LABEL_UNKNOWN).all()
+    always = Classifier.load(path, threshold=0.0)
+    assert (always.predict(patches)[0] == prob.argmax(axis=1)).all()
+    empty_label, empty_conf = clf.predict(np.zeros((0, 18, 18), np.uint8))
+    assert empty_label.shape == (0,) and empty_conf.shape == (0,)
+    with pytest.raises(ValueError, match="18"):
+        clf.predict(np.zeros((4, 16, 16), np.uint8))
+
+
+def test_mismatched_weights_are_refused_clearly(tmp_path):
+    model = GlyphNet(3)
+    cases = {
+        "shape": (_blob(model, state_dict={**model.state_dict(),
+                                           "fc1.weight": torch.zeros(32, 16)}),
+                  r"fc1\.weight has shape \(32, 16\), expected \(32, 64\)"),
+        "missing": (_blob(model, state_dict={k: v for k, v in model.state_dict().items()
+                                             if k != "conv2.bias"}), "lack conv2.bias"),
+        "version": (_blob(model, version=FORMAT_VERSION + 1), "format version"),
+        "arch": (_blob(model, arch="resnet"), "architecture 'resnet'"),
+        "format": ({"state_dict": model.state_dict()}, "not a tactile_sl_classifier"),
+    }
+    for name, (blob, message) in cases.items():
+        path = tmp_path / f"{name}.pt"
+        torch.save(blob, path)
+        with pytest.raises(ClassifierError, match=message):
+            Classifier.load(path)
+    (tmp_path / "junk.pt").write_bytes(b"not a zip file")
+    with pytest.raises(ClassifierError, match="not a loadable weights file"):
+        Classifier.load(tmp_path / "junk.pt")
+    with pytest.raises(ClassifierError, match="not found"):
+        Classifier.load(tmp_path / "absent.pt")
+
+
+def test_weights_with_code_are_not_unpickled(tmp_path):
+    """weights_only loading: a pickle that would run code is rejected, not executed."""
+    class Evil:
+        def __reduce__(self):
+            return (print, ("pwned",))
+
+    path = tmp_path / "evil.pt"
+    torch.save({"format": FORMAT, "payload": Evil()}, path)
+    with pytest.raises(ClassifierError):
+        Classifier.load(path)
+
+
+def test_shipped_weights_classify_synthetic_glyphs():
+    """Independent renderer (not the training simulator): shipped weights still read it."""
+    assert default_weights_path().is_file()
+    clf = Classifier.load()
+    assert clf.threshold == pytest.approx(DEFAULT_THRESHOLD)
+    assert clf.primitives == ["line", "circle", "triangle"]
+    correct = total = 0
+    for seed, spacing in ((10, 15.0), (11, 20.0)):
+        img = synth_image(np.random.default_rng(seed), spacing=spacing)
+        det = extract_symbols(img.gray)
+        idx, truth = label_detections(det, np.column_stack((img.u, img.v)), img.label)
+        label, _ = clf.predict(det.patches[idx])
+        correct += int((label == truth).sum())
+        total += len(idx)
+    assert total > 1000 and correct / total >= 0.99

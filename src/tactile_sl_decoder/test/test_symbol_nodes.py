@@ -1,0 +1,136 @@
+"""symbol_extractor -> symbol_classifier as two processes over loopback DDS; bad input skipped.
+
+Both installed executables run on a ROS domain of their own with
+ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; this test process publishes images and
+SymbolArrays and listens for the labelled output.
+"""
+import os
+import pathlib
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+REPO = pathlib.Path(__file__).resolve().parents[3]
+LIB = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder"
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def _start(name, domain, log):
+    exe = LIB / name
+    if not os.access(exe, os.X_OK):
+        pytest.skip(f"{exe} not installed (build the workspace)")
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+               PYTHONUNBUFFERED="1", RCUTILS_LOGGING_BUFFERED_STREAM="0")
+    return subprocess.Popen([str(exe), "--ros-args", "-r", "__ns:=/t"], env=env,
+                            stdout=log, stderr=subprocess.STDOUT)
+
+
+def test_chain_labels_images_and_survives_bad_input(tmp_path):
+    rclpy = pytest.importorskip("rclpy")
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    from tactile_sl_camera.images import image_fields
+    from tactile_sl_decoder.synth_glyphs import synth_image
+    from tactile_sl_msgs.msg import SymbolArray
+
+    domain = 30 + os.getpid() % 30
+    logs = {n: open(tmp_path / f"{n}.log", "w") for n in ("symbol_extractor",
+                                                          "symbol_classifier")}
+    procs = [_start(n, domain, f) for n, f in logs.items()]
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain)
+    try:
+        node = rclpy.create_node("probe", namespace="/t", context=context)
+        ex = SingleThreadedExecutor(context=context)
+        ex.add_node(node)
+        got = []
+        node.create_subscription(SymbolArray, "labelled_symbols", got.append,
+                                 QoSProfile(depth=50))
+        images = node.create_publisher(Image, "image", qos_profile_sensor_data)
+        symbols = node.create_publisher(SymbolArray, "symbols", QoSProfile(depth=10))
+
+        def spin_until(pred, timeout):
+            end = time.monotonic() + timeout
+            while time.monotonic() < end and not pred():
+                ex.spin_once(timeout_sec=0.05)
+                assert all(p.poll() is None for p in procs), "a node died"
+            return pred()
+
+        assert spin_until(lambda: images.get_subscription_count() > 0
+                          and symbols.get_subscription_count() > 0
+                          and node.count_publishers("labelled_symbols") > 0, 30.0)
+
+        def image(sec, **over):
+            img = synth_image(np.random.default_rng(sec), spacing=18.0)
+            msg = Image(**{k: v for k, v in image_fields(img.gray).items()})
+            msg.header.stamp.sec = sec
+            msg.header.frame_id = "left_optical"
+            for k, v in over.items():
+                setattr(msg, k, v)
+            return msg, img
+
+        bad = [image(1, encoding="32FC1")[0], image(2, height=0, width=0, step=0, data=b"")[0],
+               image(3, data=b"\0" * 100)[0]]
+        for msg in bad:
+            images.publish(msg)
+        good, truth = image(10)
+        # best effort: publish until the labelled result of the good image comes back
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and not any(m.header.stamp.sec == 10 for m in got):
+            images.publish(good)
+            spin_until(lambda: any(m.header.stamp.sec == 10 for m in got), 1.0)
+        out = [m for m in got if m.header.stamp.sec == 10]
+        assert out, "no labelled SymbolArray for the good image"
+        assert not any(m.header.stamp.sec in (1, 2, 3) for m in got)
+        m = out[0]
+        assert m.header.frame_id == "left_optical"
+        assert (m.image_width, m.image_height) == (640, 480)
+        n = len(m.u)
+        assert abs(n - len(truth.u)) < 0.05 * len(truth.u)
+        assert len(m.label) == n and len(m.confidence) == n and m.patch_size == 0
+        labels = np.frombuffer(bytes(m.label), np.uint8) if isinstance(
+            m.label, (bytes, bytearray)) else np.asarray(m.label)
+        assert (labels < 3).mean() > 0.95  # classified, not left unknown
+        assert m.spacing_px == pytest.approx(18.0, rel=0.12)
+
+        # classifier input it cannot use: 16 px patches, and arrays of different lengths
+        wrong = SymbolArray()
+        wrong.header.stamp.sec = 20
+        wrong.u = wrong.v = wrong.area = wrong.confidence = [1.0, 2.0]
+        wrong.label = [255, 255]
+        wrong.row = wrong.col = [-1, -1]
+        wrong.patch_size = 16
+        wrong.patches = bytes(2 * 16 * 16)
+        symbols.publish(wrong)
+        ragged = SymbolArray()
+        ragged.header.stamp.sec = 21
+        ragged.u = [1.0]
+        symbols.publish(ragged)
+        ok = SymbolArray()
+        ok.header.stamp.sec = 22
+        assert spin_until(lambda: False, 0.3) is False
+        symbols.publish(ok)  # an empty array is valid and passes through
+        assert spin_until(lambda: any(m.header.stamp.sec == 22 for m in got), 10.0)
+        assert not any(m.header.stamp.sec in (20, 21) for m in got)
+        assert all(p.poll() is None for p in procs)
+        ex.shutdown()
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+        for p in procs:
+            p.terminate()
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        for f in logs.values():
+            f.close()
+    text = {n: (tmp_path / f"{n}.log").read_text() for n in logs}
+    assert "skipping image" in text["symbol_extractor"]
+    assert "skipping SymbolArray" in text["symbol_classifier"]
+    assert "Traceback" not in "".join(text.values())
