@@ -6,8 +6,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from ..pattern import Constraints, Pattern, PatternFormatError, load_pattern, parse_shape
-from ..pattern import save_pattern, verify_pattern
+from ..pattern import (
+    Constraints,
+    Pattern,
+    PatternFormatError,
+    load_pattern,
+    parse_shape,
+    save_pattern,
+    verify_pattern,
+)
 from ..pattern.fileio import DEFAULT_PITCH_M
 
 EXIT_OK = 0

@@ -93,7 +93,9 @@ def render_array(pattern: Pattern, pitch_px: float, margin_pitch: float = DEFAUL
     ink = np.zeros((height, width), dtype=np.float32)
     glyphs = [glyph(name) for name in pattern.primitives]
     half = int(math.ceil(0.5 * pitch_px)) + 1
-    quant = 32  # sub-pixel offsets are quantised to 1/32 px for the tile cache
+    quant = 64  # sub-pixel offsets are quantised to 1/64 px for the tile cache
+    # small glyphs need finer area sampling to keep the ink centroid error << 0.1 px
+    supersample = max(supersample, int(math.ceil(384.0 / pitch_px)))
     cache: dict[tuple[int, int, int], np.ndarray] = {}
     for r in range(pattern.rows):
         cy = origin + r * pitch_px
