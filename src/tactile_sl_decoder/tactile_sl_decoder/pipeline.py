@@ -289,11 +289,12 @@ class StereoPipeline:
         return result
 
     def process_symbols(self, left: Glyphs, right: Glyphs, left_info: Any,
-                        right_info: Any) -> StereoResult:
+                        right_info: Any, classify_unlabelled: bool = True) -> StereoResult:
         """Two labelled SymbolArrays (as :class:`Glyphs`) + CameraInfo -> points.
 
         This is the path of the chained stage nodes; it runs exactly the same decoding and
-        triangulation as :meth:`process`.
+        triangulation as :meth:`process`.  Arrays straight from the extractor (no label at
+        all, patches present) are classified first when ``classify_unlabelled``.
         """
         t0 = time.perf_counter()
         rig = self.rig(left_info, right_info)
@@ -307,6 +308,11 @@ class StereoPipeline:
                       left.image_width, left.image_height, left.area, left.patches)
         right = Glyphs(right.u, right.v, right.label, right.confidence, right.spacing_px,
                        right.image_width, right.image_height, right.area, right.patches)
+        # Unlabelled glyphs with patches (straight from the extractor): classify them here.
+        unlabelled = [g for g in (left, right) if len(g) and g.patches is not None
+                      and np.all(g.label == LABEL_UNKNOWN) and not np.any(g.confidence)]
+        if unlabelled and classify_unlabelled:
+            self.classify_pair(left, right)
         result = self._finish(left, right, rig)
         result.timings_ms["total"] = 1e3 * (time.perf_counter() - t0)
         return result

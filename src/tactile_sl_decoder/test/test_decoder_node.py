@@ -162,9 +162,22 @@ def _wait_matched(ros, pubs, timeout=15.0):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if all(p.get_subscription_count() > 0 for p in pubs.values()):
+            ros.spin(1.0)    # let the other side of the discovery settle too
             return
         ros.spin(0.05)
     pytest.fail("decoder did not subscribe in time")
+
+
+def _send_until_cloud(ros, clouds, stamp, publish, attempts=5, wait=5.0):
+    """Publish one frame (again, if best-effort delivery lost it) until its cloud arrives."""
+    for _ in range(attempts):
+        publish()
+        end = time.monotonic() + wait
+        while time.monotonic() < end:
+            if any((c.header.stamp.sec, c.header.stamp.nanosec) == stamp for c in clouds):
+                return True
+            ros.spin(0.05)
+    return False
 
 
 def _stamped(msg, sec, nanosec):
@@ -184,69 +197,85 @@ def test_bad_input_is_warned_skipped_and_survived(ros):
     msgs = _bag_messages(1)
     img = {s: m for k, s, m in msgs if k == "image"}
     info = {s: m for k, s, m in msgs if k == "info"}
+    clock = [100]
 
-    def pair(left, right):
-        pubs[("image", "left")].publish(left)
-        pubs[("image", "right")].publish(right)
-        ros.spin(0.05)
+    def expect(text, make_left=None, make_right=None, sync=True):
+        """Send fresh bad frames (best effort may lose one) until the warning shows."""
+        for _ in range(5):
+            clock[0] += 1
+            sec = clock[0]
+            left = make_left(sec) if make_left else _stamped(img["left"], sec, 0)
+            right = make_right(sec) if make_right else _stamped(img["right"], sec, 0)
+            pubs[("image", "left")].publish(left)
+            ros.spin(0.05)
+            pubs[("image", "right")].publish(right)
+            if not sync:      # a later good pair pushes the unpaired ones out
+                ros.spin(0.05)
+                clock[0] += 1
+                pubs[("image", "left")].publish(_stamped(img["left"], clock[0], 0))
+                pubs[("image", "right")].publish(_stamped(img["right"], clock[0], 0))
+            if proc.wait_for(text, timeout=4.0, spin=ros.spin):
+                return
+        pytest.fail(f"no warning {text!r}: {proc.lines[-6:]}")
 
-    # 1. no CameraInfo yet (repeated: the first messages may race the discovery)
-    for k in range(10):
-        pair(_stamped(img["left"], 10, k), _stamped(img["right"], 10, k))
-        if proc.wait_for("no CameraInfo received yet", timeout=1.0, spin=ros.spin):
-            break
-    assert proc.wait_for("no CameraInfo received yet", spin=ros.spin), proc.lines
+    def good_cloud():
+        clock[0] += 1
+        stamp = (clock[0], 345)
+
+        def publish():
+            for side in ("left", "right"):
+                pubs[("info", side)].publish(info[side])
+            ros.spin(0.2)
+            pubs[("image", "left")].publish(_stamped(img["left"], *stamp))
+            pubs[("image", "right")].publish(_stamped(img["right"], *stamp))
+        assert _send_until_cloud(ros, clouds, stamp, publish), proc.lines
+        cloud = [c for c in clouds if (c.header.stamp.sec, c.header.stamp.nanosec) == stamp]
+        assert cloud[0].width > 500 and cloud[0].is_dense and cloud[0].height == 1
+
+    # 1. no CameraInfo yet
+    expect("no CameraInfo received yet")
     # 2. degenerate CameraInfo (all-zero K, as an uncalibrated driver sends)
     for side in ("left", "right"):
-        bad = _stamped(info[side], 11, 0)
+        bad = _stamped(info[side], 1, 0)
         bad.k = np.zeros(9)
         pubs[("info", side)].publish(bad)
-    ros.spin(0.2)
-    pair(_stamped(img["left"], 11, 0), _stamped(img["right"], 11, 0))
-    assert proc.wait_for("not calibrated", spin=ros.spin)
+    ros.spin(0.3)
+    expect("not calibrated")
     # 3. good CameraInfo and a good frame: a cloud, stamped exactly
     for side in ("left", "right"):
         pubs[("info", side)].publish(info[side])
-    ros.spin(0.2)
-    pair(_stamped(img["left"], 12, 345), _stamped(img["right"], 12, 345))
-    end = time.monotonic() + 20
-    while not clouds and time.monotonic() < end:
-        ros.spin(0.05)
-    assert clouds and (clouds[-1].header.stamp.sec, clouds[-1].header.stamp.nanosec) == (12, 345)
-    assert clouds[-1].width > 500 and clouds[-1].is_dense
+    ros.spin(0.3)
+    good_cloud()
+
     # 4. wrong encoding
-    wrong = _stamped(img["left"], 13, 0)
-    wrong.encoding = "16UC1"
-    pair(wrong, _stamped(img["right"], 13, 0))
-    assert proc.wait_for("unsupported image encoding", spin=ros.spin), proc.lines
+    def wrong_encoding(sec):
+        m = _stamped(img["left"], sec, 0)
+        m.encoding = "16UC1"
+        return m
+    expect("unsupported image encoding", wrong_encoding)
+
     # 5. image size differs from its CameraInfo
-    small = Image()
-    small.header.stamp.sec = 14
-    small.height, small.width, small.encoding, small.step = 240, 320, "mono8", 320
-    small.data = bytes(320 * 240)
-    pair(small, _stamped(img["right"], 14, 0))
-    assert proc.wait_for("320x240", spin=ros.spin)
+    def small(sec):
+        m = Image()
+        m.header.stamp.sec = sec
+        m.height, m.width, m.encoding, m.step = 240, 320, "mono8", 320
+        m.data = bytes(320 * 240)
+        return m
+    expect("320x240", small)
+
     # 6. empty image
-    empty = Image()
-    empty.header.stamp.sec = 15
-    empty.encoding = "mono8"
-    pair(empty, _stamped(img["right"], 15, 0))
-    assert proc.wait_for("empty image", spin=ros.spin)
+    def empty(sec):
+        m = Image()
+        m.header.stamp.sec = sec
+        m.encoding = "mono8"
+        return m
+    expect("empty image", empty)
     # 7. unsynchronised stereo: stamps that never match
-    pubs[("image", "left")].publish(_stamped(img["left"], 16, 0))
-    ros.spin(0.1)
-    pubs[("image", "right")].publish(_stamped(img["right"], 16, 500_000_000))
-    ros.spin(0.1)
-    pair(_stamped(img["left"], 17, 0), _stamped(img["right"], 17, 0))
-    assert proc.wait_for("no stereo partner", spin=ros.spin)
+    expect("no stereo partner", make_right=lambda sec: _stamped(img["right"], sec, 5 * 10**8),
+           sync=False)
     # still alive and still decoding
-    pair(_stamped(img["left"], 18, 0), _stamped(img["right"], 18, 0))
-    end = time.monotonic() + 20
-    while not any(c.header.stamp.sec == 18 for c in clouds) and time.monotonic() < end:
-        ros.spin(0.05)
+    good_cloud()
     assert proc.proc.poll() is None
-    assert any((c.header.stamp.sec, c.header.stamp.nanosec) == (18, 0) and c.width > 500
-               for c in clouds)
 
 
 def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
@@ -270,13 +299,59 @@ def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
     for kind, side, m in msgs:
         frames.setdefault((m.header.stamp.sec, m.header.stamp.nanosec), []).append((kind, side, m))
     for stamp, parts in sorted(frames.items()):
-        for kind, side, m in sorted(parts, key=lambda p: p[0] != "info"):   # info first
-            pubs[(kind, side)].publish(m)
-            ros.spin(0.02)
-        end = time.monotonic() + 20
-        while not any((c.header.stamp.sec, c.header.stamp.nanosec) == stamp for c in clouds) \
-                and time.monotonic() < end:
-            ros.spin(0.05)
+        def publish(parts=parts):
+            for kind, side, m in sorted(parts, key=lambda p: p[0] != "info"):   # info first
+                pubs[(kind, side)].publish(m)
+                ros.spin(0.2 if kind == "info" else 0.02)
+        _send_until_cloud(ros, clouds, stamp, publish)
+    online = {(c.header.stamp.sec, c.header.stamp.nanosec): bytes(c.data) for c in clouds}
+    assert set(online) == set(frames), proc.lines[-5:]
+    for stamp in online:
+        assert online[stamp] == offline[stamp]
+
+
+def test_symbols_input_gives_the_same_points_as_images(ros, tmp_path):
+    """Chained stages: decoder fed labelled SymbolArrays == decoder fed images (replay)."""
+    from rclpy.qos import qos_profile_sensor_data
+
+    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_camera.images import to_gray
+    from tactile_sl_decoder.cli import main as cli_main
+    from tactile_sl_decoder.nodes.decoder_node import make_symbol_array
+    from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
+    from tactile_sl_msgs.msg import SymbolArray
+
+    pattern = _pattern_file(tmp_path)
+    out = tmp_path / "out.mcap"
+    assert cli_main(["replay", str(BAG), "-o", str(out), "--no-progress",
+                     "--pattern", str(pattern)]) == 0
+    offline = {(m.header.stamp.sec, m.header.stamp.nanosec): bytes(m.data)
+               for _, m in BagReader(out).messages(["/tactile/points"])}
+
+    proc = ros.start("-p", "input:=symbols")
+    pubs, clouds = _io(ros)
+    for side in ("left", "right"):
+        pubs[("symbols", side)] = ros.node.create_publisher(
+            SymbolArray, f"/tactile/{side}/symbols", qos_profile_sensor_data)
+    del pubs[("image", "left")], pubs[("image", "right")]
+    _wait_matched(ros, pubs)
+    stages = StereoPipeline(PatternSpec.load(pattern))     # the stage nodes' work, in-process
+    frames = {}
+    for kind, side, m in _bag_messages(2):
+        frames.setdefault((m.header.stamp.sec, m.header.stamp.nanosec), {})[(kind, side)] = m
+    for stamp, parts in sorted(frames.items()):
+        left, right = stages.extract_pair(to_gray(parts[("image", "left")]),
+                                          to_gray(parts[("image", "right")]))
+        stages.classify_pair(left, right)
+        def publish(parts=parts, left=left, right=right):
+            for side in ("left", "right"):
+                pubs[("info", side)].publish(parts[("info", side)])
+            ros.spin(0.3)
+            for side, g in (("left", left), ("right", right)):
+                pubs[("symbols", side)].publish(
+                    make_symbol_array(g, parts[("image", side)].header))
+                ros.spin(0.02)
+        _send_until_cloud(ros, clouds, stamp, publish)
     online = {(c.header.stamp.sec, c.header.stamp.nanosec): bytes(c.data) for c in clouds}
     assert set(online) == set(frames), proc.lines[-5:]
     for stamp in online:

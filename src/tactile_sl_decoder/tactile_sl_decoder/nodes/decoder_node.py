@@ -222,11 +222,14 @@ class DecoderNode(Node):
     def _report(self) -> None:
         if not self._proc_ms and not self.stats["skipped"]:
             return
-        ms = np.asarray(self._proc_ms) if self._proc_ms else np.zeros(1)
+        timing = ""
+        if self._proc_ms:
+            ms = np.asarray(self._proc_ms)
+            timing = (f"; last period: median {np.median(ms):.1f} ms, max {ms.max():.1f} ms "
+                      f"per frame")
         self.get_logger().info(
-            f"{self.stats['frames']} frames, {self.stats['skipped']} skipped, "
-            f"{self.stats['dropped']} unpaired dropped; last 10 s: median "
-            f"{np.median(ms):.1f} ms, max {ms.max():.1f} ms per frame")
+            f"{self.stats['frames']} frames decoded, {self.stats['skipped']} skipped, "
+            f"{self.stats['dropped']} unpaired dropped{timing}")
         self._proc_ms = []
 
 
