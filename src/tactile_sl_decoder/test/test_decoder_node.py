@@ -12,26 +12,12 @@ import time
 
 import numpy as np
 import pytest
-import yaml
 
 REPO = pathlib.Path(__file__).resolve().parents[3]
 EXE = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder" / "decoder"
 BAG = REPO / "bags" / "sphere_deep_small.mcap"
-ARTWORK = REPO / "src" / "tactile_sl_camera" / "artwork" / "pattern.png.yaml"
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-
-
-def _pattern_file(tmp_path):
-    """Contract pattern YAML of the artwork the bundled bags were rendered from."""
-    meta = yaml.safe_load(ARTWORK.read_text())
-    doc = {"tactile_sl_pattern": 1, "symbols": int(meta["symbols"]),
-           "window": list(meta["window"]), "min_hamming": int(meta["min_hamming"]),
-           "pitch_m": float(meta["pitch_m"]), "primitives": list(meta["primitives"]),
-           "rows": int(meta["rows"]), "cols": int(meta["cols"]), "array": list(meta["array"])}
-    path = tmp_path / "pattern.yaml"
-    path.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return path
 
 
 class NodeProcess:
@@ -93,8 +79,7 @@ def ros(tmp_path):
     procs = []
 
     def start(*args):
-        p = NodeProcess(domain, ["-p", f"pattern_file:={_pattern_file(tmp_path)}",
-                                 "-p", "warn_period:=0.0", *args])
+        p = NodeProcess(domain, ["-p", "warn_period:=0.0", *args])
         procs.append(p)
         return p
 
@@ -284,8 +269,7 @@ def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
     from tactile_sl_decoder.cli import main as cli_main
 
     out = tmp_path / "out.mcap"
-    assert cli_main(["replay", str(BAG), "-o", str(out), "--no-progress",
-                     "--pattern", str(_pattern_file(tmp_path))]) == 0
+    assert cli_main(["replay", str(BAG), "-o", str(out), "--no-progress"]) == 0
     offline = {}
     for _raw, msg in BagReader(out).messages(["/tactile/points"]):
         offline[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = bytes(msg.data)
@@ -321,10 +305,8 @@ def test_symbols_input_gives_the_same_points_as_images(ros, tmp_path):
     from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
     from tactile_sl_msgs.msg import SymbolArray
 
-    pattern = _pattern_file(tmp_path)
     out = tmp_path / "out.mcap"
-    assert cli_main(["replay", str(BAG), "-o", str(out), "--no-progress",
-                     "--pattern", str(pattern)]) == 0
+    assert cli_main(["replay", str(BAG), "-o", str(out), "--no-progress"]) == 0
     offline = {(m.header.stamp.sec, m.header.stamp.nanosec): bytes(m.data)
                for _, m in BagReader(out).messages(["/tactile/points"])}
 
@@ -335,7 +317,7 @@ def test_symbols_input_gives_the_same_points_as_images(ros, tmp_path):
             SymbolArray, f"/tactile/{side}/symbols", qos_profile_sensor_data)
     del pubs[("image", "left")], pubs[("image", "right")]
     _wait_matched(ros, pubs)
-    stages = StereoPipeline(PatternSpec.load(pattern))     # the stage nodes' work, in-process
+    stages = StereoPipeline(PatternSpec.load())     # the stage nodes' work, in-process
     frames = {}
     for kind, side, m in _bag_messages(2):
         frames.setdefault((m.header.stamp.sec, m.header.stamp.nanosec), {})[(kind, side)] = m

@@ -24,6 +24,7 @@ from tactile_sl_decoder.pipeline import (
 )
 
 REPO = pathlib.Path(__file__).resolve().parents[3]
+ARTWORK = REPO / "src" / "tactile_sl_camera" / "artwork" / "pattern.png.yaml"
 
 
 def make_pattern(rows=12, cols=14, seed=0, k=3, h=3):
@@ -258,3 +259,16 @@ def test_frame_metrics_count_correct_wrong_and_extra():
     assert cloud_to_arrays(msg).tobytes() == out.tobytes()
     b = aggregate("x", [m, m])
     assert b.correct == 2 and b.wrong == 2 and b.coverage == pytest.approx(1 / 3)
+
+
+def test_shipped_pattern_decodes_and_matches_the_printed_artwork():
+    """The decoder's default pattern is the one the pad (and the bundled bags) carry."""
+    import yaml
+
+    spec = PatternSpec.load()
+    meta = yaml.safe_load(ARTWORK.read_text())
+    art = np.array([[int(ch) for ch in row] for row in meta["array"]], np.uint8)
+    assert np.array_equal(spec.array, art)
+    assert spec.window == tuple(meta["window"]) and spec.min_hamming == meta["min_hamming"]
+    pipe = StereoPipeline(spec)
+    assert len(pipe.codebook.windows) == (spec.array.shape[0] - 2) * (spec.array.shape[1] - 2)
