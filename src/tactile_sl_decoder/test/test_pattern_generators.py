@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactile_sl_decoder.pattern import Constraints, verify_array
+from tactile_sl_decoder.pattern import Constraints, load_default_pattern, verify_array
 from tactile_sl_decoder.pattern.generators import (
     GENERATORS,
     GenerationFailed,
@@ -47,6 +47,11 @@ def test_shipped_size_is_reached_by_our_generator():
     result = generate("auto", c, 30, 28, seed=0, time_limit=30)
     cert = verify_array(result.array, c)
     assert cert.valid and cert.windows == 728
+    # the shipped file records how it was made; that recipe must still reproduce it
+    shipped = load_default_pattern()
+    recipe = shipped.extra["generator"]
+    assert (recipe["algorithm"], recipe["seed"]) == ("auto", 0)
+    assert np.array_equal(result.array, shipped.array)
 
 
 def test_k6_100x100_under_a_minute():

@@ -105,6 +105,11 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
                 nodes += 1
                 if pos > best_pos:
                     best_pos = pos
+                if not nodes & 0x3FF:
+                    if budget.expired_now():
+                        break
+                    budget.report(f"windows {placed_windows}/{windows_total} attempt {attempt} "
+                                  f"backtracks {total_backtracks + backtracks}")
                 continue
             # dead end: undo the previous cell's choice and try its next value
             cands[pos] = None

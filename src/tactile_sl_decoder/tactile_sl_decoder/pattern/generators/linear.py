@@ -103,32 +103,26 @@ def primitive_polynomials(p: int, d: int, limit: int = 256) -> tuple[tuple[int, 
 
 
 def m_sequence(f: tuple[int, ...], p: int) -> np.ndarray:
-    """One period of the maximal-length sequence of f, started from state 0...01."""
+    """One period of the maximal-length sequence of f, started from state 0...01.
+
+    s[t+d] = -sum_i f_i s[t+i] (mod p); a plain integer loop is fast enough here (the
+    period is at most :data:`MAX_PERIOD`, and realistic patterns need < 1e5 terms).
+    """
     d = len(f) - 1
     period = p ** d - 1
-    seq = np.zeros(period + d, dtype=np.int64)
-    seq[d - 1] = 1
-    taps = np.array([(-c) % p for c in f[:d]], dtype=np.int64)
-    # s[t+d] = sum_i -f_i s[t+i]; a tight Python loop over ints is fine up to ~1e6 terms
-    tap_list = [int(t) for t in taps]
+    taps = [(i, (-c) % p) for i, c in enumerate(f[:d]) if (-c) % p]
     s = [0] * (d - 1) + [1]
-    for t in range(period):
-        s.append(sum(tap_list[i] * s[t + i] for i in range(d) if tap_list[i]) % p)
-    seq[:] = s[:period + d]
-    return seq[:period].astype(np.uint8)
+    for t in range(period - d):
+        s.append(sum(coef * s[t + i] for i, coef in taps) % p)
+    return np.asarray(s[:period], dtype=np.uint8)
 
 
 def fold(seq: np.ndarray, rows: int, cols: int, stride: int, offset: int,
          transpose: bool) -> np.ndarray:
     """a[i, j] = seq[(stride*i + j + offset) mod L] (or with i and j swapped)."""
-    period = len(seq)
-    if transpose:
-        i, j = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
-        idx = (i + stride * j + offset) % period
-    else:
-        i, j = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
-        idx = (stride * i + j + offset) % period
-    return seq[idx]
+    i, j = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+    idx = (i + stride * j) if transpose else (stride * i + j)
+    return seq[(idx + offset) % len(seq)]
 
 
 def _windows_distinct(rows: int, cols: int, window: tuple[int, int], stride: int,
