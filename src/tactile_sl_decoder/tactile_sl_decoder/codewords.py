@@ -326,12 +326,15 @@ class CodewordDecoder:
         cell = self._consistency(pgrid.nbr, cell, lay)
         cell = self._islands(pgrid, cell, lay)
         values = lay.values(cb.array)
+        grew = False
         for _ in range(p.grow_iterations):
             grown = self._grow(pgrid.nbr, cell, lab, lay, values)
             if not np.any(grown != cell):
                 break
+            grew = True
             cell = self._consistency(pgrid.nbr, grown, lay)
-        cell = self._islands(pgrid, cell, lay)
+        if grew:
+            cell = self._islands(pgrid, cell, lay)
         has = cell >= 0
         _, r, c = lay.split(cell[has])
         row[has] = r.astype(np.int32)

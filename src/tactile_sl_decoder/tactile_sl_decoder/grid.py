@@ -142,13 +142,15 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     if n < 3:
         return _empty(n, pts)
     k = min(p.k_neighbours, n)
-    tree = cKDTree(pts)
-    dist, idx = tree.query(pts, k=k)
+    tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)   # faster to build
+    bound = 3.0 * spacing_hint if spacing_hint > 0 else np.inf   # only prunes the search
+    dist, idx = tree.query(pts, k=k, distance_upper_bound=bound)
+    idx = np.where(np.isfinite(dist), idx, 0)          # missing -> masked by `valid`
     dist, idx = dist[:, 1:], idx[:, 1:]               # drop self
     disp = pts[idx] - pts[:, None, :]
     valid = np.isfinite(dist)
     nn = dist[:, 0]
-    spacing = float(np.median(nn)) if spacing_hint <= 0 else float(spacing_hint)
+    spacing = float(np.median(nn[np.isfinite(nn)])) if np.isfinite(nn).any() else 0.0
     if not np.isfinite(spacing) or spacing <= 0:
         return _empty(n, pts)
     col_dir = _global_frame(disp[:, :4].reshape(-1, 2), dist[:, :4].reshape(-1), spacing)

@@ -223,7 +223,8 @@ class StereoPipeline:
         label = np.concatenate([g.label for g in images])
         conf = np.concatenate([g.confidence for g in images])
         groups = np.repeat(np.arange(len(images)), sizes)
-        grid = build_grid(u, v, self.params.grid, 0.0)
+        hints = [g.spacing_px for g in images if g.spacing_px > 0]
+        grid = build_grid(u, v, self.params.grid, max(hints) if hints else 0.0)
         res = self.decoder.decode(grid, label, conf, groups)
         start = 0
         for g, n in zip(images, sizes):
