@@ -118,6 +118,7 @@ class FastLeNet:
         if self._torch is None:
             self._torch = {k: torch.from_numpy(np.ascontiguousarray(v))
                            for k, v in self.__dict__.items() if isinstance(v, np.ndarray)}
+            self._torch["t2r"] = self._torch["t2"].reshape(5, 42, 48)
         w = self._torch
         n = patches.shape[0]
         with torch.inference_mode():
@@ -131,24 +132,27 @@ class FastLeNet:
             # input of one output row is 55 consecutive values
             x = x.reshape(n, PATCH, PATCH)
             flat = torch.stack((x[:, :, 0:11], x[:, :, 7:18])).reshape(2, n, PATCH * 11)
-            y = torch.empty((2, 14, n, 42))
+            # even and odd output rows in separate buffers: row pooling is then one
+            # elementwise max of two contiguous arrays
+            y = torch.empty((2, 2, 7, n, 42))  # (row parity, block, pooled row, patch, col)
             for b in range(2):
                 for r in range(14):  # 28 matrix products, not a loop over glyphs
-                    torch.matmul(flat[b, :, r * 11:r * 11 + 55], w["t1"][b], out=y[b, r])
-            y = torch.maximum(y[:, 0::2], y[:, 1::2])  # pool rows -> (2, 7, n, 42)
-            p1 = torch.empty((n, 7, 42))  # (patch, pooled row, (pooled col, channel))
-            pt = p1.transpose(0, 1)
-            pt[..., 0:18] = torch.maximum(y[0, ..., 0:18], y[0, ..., 24:42])  # cols 0|1..4|5
-            pt[..., 18:24] = torch.maximum(y[0, ..., 18:24], y[1, ..., 18:24])  # cols 6|7
-            pt[..., 24:42] = torch.maximum(y[1, ..., 0:18], y[1, ..., 24:42])  # 8|9..12|13
-            p1 -= (mean[:, None] * w["s1"][None, :])[:, None, :]
-            p1 *= inv[:, None, None]
+                    torch.matmul(flat[b, :, r * 11:r * 11 + 55], w["t1"][b],
+                                 out=y[r % 2, b, r // 2])
+            y = torch.maximum(y[0], y[1], out=y[0])  # (block, pooled row, patch, 42)
+            p1 = torch.empty((7, n, 42))  # (pooled row, patch, (pooled col, channel))
+            torch.maximum(y[0, ..., 0:18], y[0, ..., 24:42], out=p1[..., 0:18])  # cols 0|1..
+            torch.maximum(y[0, ..., 18:24], y[1, ..., 18:24], out=p1[..., 18:24])  # 6|7
+            torch.maximum(y[1, ..., 0:18], y[1, ..., 24:42], out=p1[..., 24:42])  # 8|9..
+            p1 -= mean[:, None] * w["s1"][None, :]
+            p1 *= inv[:, None]
             p1 += w["b1"]
             p1.clamp_(min=0.0)
-            rows = p1.reshape(n, 7 * 42)
             z = torch.empty((3, n, 48))
-            for q in range(3):
-                torch.matmul(rows[:, q * 42:q * 42 + 210], w["t2"], out=z[q])
+            for q in range(3):  # conv2 output row q = sum over its 5 kernel rows
+                torch.mm(p1[q], w["t2r"][0], out=z[q])
+                for dy in range(1, 5):
+                    z[q].addmm_(p1[q + dy], w["t2r"][dy])
             r0 = torch.maximum(z[0], z[1])  # ceil-mode pooling of 3 rows: {0, 1}, {2}
             r1 = z[2]
             feats = torch.cat((torch.maximum(r0[:, 0:16], r0[:, 16:32]), r0[:, 32:48],

@@ -16,6 +16,7 @@ there is no Python loop over glyphs.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import cv2
@@ -184,7 +185,7 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
     return Detections(uu, vv, aa, spacing, patches, local)
 
 
-def _median_nn(points: np.ndarray, sample: int = 256) -> float:
+def _median_nn(points: np.ndarray, sample: int = 64) -> float:
     """Median nearest-neighbour distance of (a fixed subsample of) points."""
     tree = cKDTree(points)
     probe = points[:: max(1, len(points) // sample)]
@@ -200,18 +201,26 @@ def patch_centroid_offset(patches: np.ndarray, dark: bool = True,
     of ``radius`` patch sides, which holds the glyph but not its neighbours.
     """
     n, size = patches.shape[0], patches.shape[1]
-    flat = patches.reshape(n, size * size).astype(np.float32)
-    mean = flat.mean(axis=1, keepdims=True)
-    weight = (mean - flat) if dark else (flat - mean)
+    weight = patches.reshape(n, size * size).astype(np.float32)
+    mean = weight.mean(axis=1)
+    if dark:
+        np.subtract(mean[:, None], weight, out=weight)
+    else:
+        weight -= mean[:, None]
     np.maximum(weight, 0.0, out=weight)
+    moments = weight @ _centroid_kernels(size, radius)  # one thin product: (n, 3)
+    total = np.maximum(moments[:, 0], 1e-6)
+    return moments[:, 1] / total, moments[:, 2] / total
+
+
+@functools.lru_cache(maxsize=8)
+def _centroid_kernels(size: int, radius: float) -> np.ndarray:
+    """(size*size, 3) disc mask, disc * x and disc * y, for patch_centroid_offset."""
     g = np.arange(size, dtype=np.float32) - (size - 1) / 2.0
     gx = np.broadcast_to(g[None, :], (size, size)).reshape(-1)
     gy = np.broadcast_to(g[:, None], (size, size)).reshape(-1)
     disc = ((gx * gx + gy * gy) <= (radius * size) ** 2).astype(np.float32)
-    weight *= disc
-    # explicit reductions: a BLAS call this thin is slower, and threads contend on small hosts
-    total = np.maximum(weight.sum(axis=1), 1e-6)
-    return (weight * gx).sum(axis=1) / total, (weight * gy).sum(axis=1) / total
+    return np.ascontiguousarray(np.stack([disc, disc * gx, disc * gy], axis=1))
 
 
 def split_regions(labels: np.ndarray, stats: np.ndarray, ids: np.ndarray, k: np.ndarray,
@@ -308,20 +317,24 @@ def estimate_spacing(u: np.ndarray, v: np.ndarray, default: float = 18.0,
     if n < 2:
         return 0.0, np.full(n, default, np.float32)
     pts = np.column_stack((u, v)).astype(np.float64)
-    tree = cKDTree(pts, balanced_tree=False)
+    tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
     first = second = None
     if search_px is not None:
         pairs = tree.query_pairs(float(search_px), output_type="ndarray")
         if len(pairs) >= n // 2:
             d = np.hypot(*(pts[pairs[:, 0]] - pts[pairs[:, 1]]).T)
-            who = np.concatenate((pairs[:, 0], pairs[:, 1]))
+            who = pairs.T.reshape(-1)
             dist = np.concatenate((d, d))
-            order = np.lexsort((dist, who))
-            who, dist = who[order], dist[order]
-            start = np.searchsorted(who, np.arange(n))
-            has = np.bincount(who, minlength=n)
-            first = np.where(has >= 1, dist[np.minimum(start, len(dist) - 1)], np.nan)
-            second = np.where(has >= 2, dist[np.minimum(start + 1, len(dist) - 1)], first)
+            first = np.full(n, np.inf)
+            np.minimum.at(first, who, dist)
+            is_first = dist == first[who]
+            second = np.full(n, np.inf)
+            np.minimum.at(second, who[~is_first], dist[~is_first])
+            # a tie for the nearest (a perfect lattice) makes it the second nearest too
+            second = np.where(np.bincount(who[is_first], minlength=n) >= 2, first, second)
+            second = np.where(np.isinf(second), first, second)
+            first[np.isinf(first)] = np.nan
+            second[np.isinf(second)] = np.nan
     if first is None:
         kk = min(3, n)
         dist, _ = tree.query(pts, k=kk)
