@@ -42,7 +42,7 @@ def _bags(args: argparse.Namespace) -> list[str]:
 def _pipeline(args: argparse.Namespace):
     from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 
-    params = PipelineParams(threads=args.threads)
+    params = PipelineParams(threads=args.threads, cpu_threads=args.cpu_threads)
     params.decode.mirrored = args.mirrored
     return StereoPipeline(PatternSpec.load(args.pattern), None, params)
 

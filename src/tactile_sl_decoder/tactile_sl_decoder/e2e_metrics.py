@@ -229,3 +229,58 @@ def format_table(bags: Iterable[BagMetrics], file: TextIO = sys.stdout) -> None:
               f"{b.wrong:>6} {100 * b.wrong_rate:>6.3f}% {1e3 * b.rmse_m:>8.4f} "
               f"{1e3 * b.median_m:>7.4f} {1e3 * b.p95_m:>7.4f} {100 * b.coverage_min:>7.1f}%",
               file=file)
+
+
+def e2e_section(args: Any, bags: list[Path]) -> str:
+    """`tactile-sl evaluate` report section: end-to-end figures per frame and per bag.
+
+    Signature of ``evaluate_cmd.SECTIONS`` entries; reads ``args.pattern``,
+    ``args.weights``, ``args.namespace``, ``args.max_frames``, ``args.totals_only`` and
+    ``args.json`` (figures also written to ``<json stem>.e2e.json``) when present.
+    """
+    import io
+    import json
+
+    from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
+
+    classifier = None
+    weights = getattr(args, "weights", None)
+    if weights:
+        from tactile_sl_decoder.classifier import Classifier
+
+        classifier = Classifier.load(weights)
+    pattern = getattr(args, "pattern", None)
+    pipe = StereoPipeline(PatternSpec.load(pattern), classifier)
+    namespace = getattr(args, "namespace", "/tactile")
+    per_bag: list[BagMetrics] = []
+    per_frame: list[tuple[str, FrameMetrics]] = []
+    try:
+        for bag in bags:
+            frames, summary = evaluate_bag(bag, pipe, namespace, progress=sys.stderr,
+                                           max_frames=int(getattr(args, "max_frames", 0) or 0))
+            per_bag.append(summary)
+            per_frame += [(summary.name, f) for f in frames]
+    finally:
+        pipe.close()
+    out = io.StringIO()
+    print("End to end (decoded cells and 3-D points vs ground truth; coverage = visible "
+          "glyphs decoded to the right cell and triangulated)", file=out)
+    if not getattr(args, "totals_only", False):
+        print(f"{'bag':<24} {'stamp':>20} {'visible':>8} {'points':>7} {'coverage':>9} "
+              f"{'wrong':>6} {'rmse mm':>8} {'med mm':>7} {'p95 mm':>7} {'ms':>6}", file=out)
+        for name, f in per_frame:
+            s = f.summary()
+            print(f"{name:<24} {f.stamp_ns:>20} {f.visible:>8} {f.points:>7} "
+                  f"{100 * f.coverage:>8.2f}% {f.wrong:>6} {1e3 * s['rmse_m']:>8.4f} "
+                  f"{1e3 * s['median_m']:>7.4f} {1e3 * s['p95_m']:>7.4f} "
+                  f"{f.timings_ms.get('total', float('nan')):>6.1f}", file=out)
+        print(file=out)
+    format_table(per_bag, file=out)
+    json_path = getattr(args, "json", None)
+    if json_path:
+        target = Path(json_path).with_suffix(".e2e.json")
+        target.write_text(json.dumps({
+            "bags": [b.summary() for b in per_bag],
+            "frames": [dict(bag=name, **f.summary()) for name, f in per_frame]}, indent=1))
+        print(f"(end-to-end figures also in {target})", file=out)
+    return out.getvalue().rstrip("\n")

@@ -28,6 +28,30 @@ from tactile_sl_decoder.stereo import StereoParams, StereoRig, match_and_triangu
 LABEL_UNKNOWN = 255
 
 
+def set_cpu_threads(n: int, torch_too: bool = True) -> None:
+    """Intra-op threads of OpenCV and torch for this process (0 = leave the defaults).
+
+    Per frame the work is small (a few ms): with several threads per library on a small,
+    shared machine the threads wait on each other (torch inference measured 500 ms instead of
+    6 ms with 2 threads on 2 busy cores), so the pipeline runs them single-threaded.
+    """
+    if n <= 0:
+        return
+    import cv2
+
+    if cv2.getNumThreads() != n:
+        cv2.setNumThreads(n)
+    if not torch_too:
+        return
+    try:
+        import torch
+
+        if torch.get_num_threads() != n:
+            torch.set_num_threads(n)
+    except ImportError:
+        pass
+
+
 class PipelineInputError(ValueError):
     """A stereo frame the pipeline cannot process (the message says why)."""
 
@@ -91,6 +115,7 @@ class PipelineParams:
     stereo: StereoParams = field(default_factory=StereoParams)
     extraction: Any = None          # tactile_sl_decoder.extraction.ExtractionParams
     threads: int = 1                # >1: extract left and right concurrently
+    cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
 
 
 @dataclass
@@ -140,6 +165,7 @@ class StereoPipeline:
                  extractor: Callable[[np.ndarray, Any], Any] | None = None) -> None:
         self.pattern = PatternSpec.from_pattern(pattern)
         self.params = params or PipelineParams()
+        set_cpu_threads(self.params.cpu_threads, torch_too=False)   # torch: when classifying
         self.codebook = Codebook(self.pattern.array, self.pattern.window,
                                  self.pattern.min_hamming, self.pattern.symbols,
                                  self.params.decode.max_errors, self.params.decode.max_erasures)
@@ -188,7 +214,9 @@ class StereoPipeline:
         patches = [g.patches for g in (left, right) if g.patches is not None and len(g)]
         if not patches:
             return
-        label, conf = self._classifier().predict(np.concatenate(patches))
+        classifier = self._classifier()
+        set_cpu_threads(self.params.cpu_threads)
+        label, conf = classifier.predict(np.concatenate(patches))
         label = np.asarray(label, np.uint8)
         conf = np.asarray(conf, np.float32)
         if len(left) and left.patches is not None:

@@ -50,21 +50,6 @@ def _d(text: str) -> ParameterDescriptor:
     return ParameterDescriptor(description=text)
 
 
-def set_cpu_threads(n: int) -> None:
-    """Intra-op threads of OpenCV and torch (0 = leave the libraries' defaults)."""
-    if n <= 0:
-        return
-    import cv2
-
-    cv2.setNumThreads(n)
-    try:
-        import torch
-
-        torch.set_num_threads(n)
-    except ImportError:
-        pass
-
-
 def stamp_ns(header: Any) -> int:
     """Header stamp as integer nanoseconds (exact)."""
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
@@ -122,7 +107,7 @@ class DecoderNode(Node):
         params.decode.min_component = int(gp("min_component").value)
         params.stereo.max_reprojection_px = float(gp("max_reprojection_px").value)
         params.threads = int(gp("threads").value)
-        set_cpu_threads(int(gp("cpu_threads").value))
+        params.cpu_threads = int(gp("cpu_threads").value)
         pattern = PatternSpec.load(str(gp("pattern_file").value) or None)
         classifier = None
         if self.input_mode == "images":
