@@ -172,7 +172,7 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
     vv = np.concatenate(v).astype(np.float32)
     aa = np.concatenate(area).astype(np.float32)
     spacing, local = estimate_spacing(uu, vv, params.default_spacing_px,
-                                      search_px=3.0 * np.sqrt(typical))
+                                      search_px=2.4 * np.sqrt(typical))
     step = local * (params.patch_span / params.patch_size)
     patches = sample_patches(gray, uu, vv, step, params.patch_size)
     if params.refine and len(single):
@@ -309,38 +309,34 @@ def estimate_spacing(u: np.ndarray, v: np.ndarray, default: float = 18.0,
 
     The local spacing is the mean distance to the two nearest neighbours (both are grid
     neighbours even at the image edge), clipped to 0.6-1.6 times the global spacing so that
-    a stray detection next to a glyph cannot shrink its patch. With ``search_px`` only pairs
-    closer than that are considered (a pair search is several times faster than k-nearest
-    queries); glyphs with no neighbour in range get the global spacing.
+    a stray detection next to a glyph cannot shrink its patch. With ``search_px``, neighbours
+    come from a search for all pairs closer than that (faster than k-nearest queries for
+    all glyphs); only glyphs with fewer than two neighbours in range are queried.
     """
     n = len(u)
     if n < 2:
         return 0.0, np.full(n, default, np.float32)
     pts = np.column_stack((u, v)).astype(np.float64)
     tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
-    first = second = None
+    first = np.full(n, np.inf)
+    second = np.full(n, np.inf)
     if search_px is not None:
         pairs = tree.query_pairs(float(search_px), output_type="ndarray")
-        if len(pairs) >= n // 2:
-            d = np.hypot(*(pts[pairs[:, 0]] - pts[pairs[:, 1]]).T)
-            who = pairs.T.reshape(-1)
-            dist = np.concatenate((d, d))
-            first = np.full(n, np.inf)
-            np.minimum.at(first, who, dist)
-            is_first = dist == first[who]
-            second = np.full(n, np.inf)
-            np.minimum.at(second, who[~is_first], dist[~is_first])
-            # a tie for the nearest (a perfect lattice) makes it the second nearest too
-            second = np.where(np.bincount(who[is_first], minlength=n) >= 2, first, second)
-            second = np.where(np.isinf(second), first, second)
-            first[np.isinf(first)] = np.nan
-            second[np.isinf(second)] = np.nan
-    if first is None:
+        d = np.hypot(*(pts[pairs[:, 0]] - pts[pairs[:, 1]]).T)
+        who = pairs.T.reshape(-1)
+        dist = np.concatenate((d, d))
+        np.minimum.at(first, who, dist)
+        is_first = dist == first[who]
+        np.minimum.at(second, who[~is_first], dist[~is_first])
+        # a tie for the nearest (a perfect lattice) makes it the second nearest too
+        second = np.where(np.bincount(who[is_first], minlength=n) >= 2, first, second)
+    lacking = np.flatnonzero(np.isinf(second))  # fewer than two neighbours within range
+    if len(lacking):
         kk = min(3, n)
-        dist, _ = tree.query(pts, k=kk)
-        first, second = dist[:, 1], dist[:, kk - 1]
-    spacing = float(np.nanmedian(first))
-    local = np.where(np.isnan(first), spacing, (first + second) / 2.0)
+        dist, _ = tree.query(pts[lacking], k=kk)
+        first[lacking], second[lacking] = dist[:, 1], dist[:, kk - 1]
+    spacing = float(np.median(first))
+    local = (first + second) / 2.0
     local = np.clip(local, 0.6 * spacing, 1.6 * spacing)
     return spacing, local.astype(np.float32)
 
