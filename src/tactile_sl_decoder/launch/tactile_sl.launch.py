@@ -15,9 +15,9 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
-from launch.conditions import IfCondition, LaunchConfigurationEquals
+from launch.conditions import IfCondition
 from launch.launch_description_sources import PythonLaunchDescriptionSource
-from launch.substitutions import LaunchConfiguration, PythonExpression
+from launch.substitutions import EqualsSubstitution, LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 
 
@@ -29,6 +29,7 @@ def generate_launch_description() -> LaunchDescription:
     stages = LaunchConfiguration("stages")
     decoder_yaml = os.path.join(decoder_share, "config", "decoder.yaml")
     replay_yaml = os.path.join(camera_share, "config", "replay.yaml")
+    camera_yaml = os.path.join(camera_share, "config", "stereo_camera.yaml")
     return LaunchDescription([
         DeclareLaunchArgument("namespace", default_value="/tactile"),
         DeclareLaunchArgument("source", default_value="replay",
@@ -44,10 +45,12 @@ def generate_launch_description() -> LaunchDescription:
             parameters=[replay_yaml, {"bag": LaunchConfiguration("bag"),
                                       "rate": LaunchConfiguration("rate"),
                                       "loop": LaunchConfiguration("loop")}],
-            condition=LaunchConfigurationEquals("source", "replay"), output="screen"),
+            condition=IfCondition(EqualsSubstitution(LaunchConfiguration("source"), "replay")),
+            output="screen"),
         Node(
             package="tactile_sl_camera", executable="stereo_camera", name="stereo_camera",
-            namespace=ns, condition=LaunchConfigurationEquals("source", "camera"),
+            namespace=ns, parameters=[camera_yaml],
+            condition=IfCondition(EqualsSubstitution(LaunchConfiguration("source"), "camera")),
             output="screen"),
         IncludeLaunchDescription(
             PythonLaunchDescriptionSource(
