@@ -369,8 +369,8 @@ class CodewordDecoder:
             cell[bad] = -1
         # A cell claimed by two glyphs: at least one is wrong, drop both.
         has = np.flatnonzero(cell >= 0)
-        uniq, inv, cnt = np.unique(cell[has], return_inverse=True, return_counts=True)
-        cell[has[cnt[inv] > 1]] = -1
+        claims = np.bincount(cell[has], minlength=lay.size)
+        cell[has[claims[cell[has]] > 1]] = -1
         return cell
 
     def _islands(self, grid: Grid, cell: np.ndarray, lay: _Layout) -> np.ndarray:
@@ -402,9 +402,10 @@ class CodewordDecoder:
         # The largest region of each image (group) is the reference for its other regions.
         dec_group = lay.split(cell[dec])[0]
         is_main = np.zeros(len(sizes), dtype=bool)
-        for grp in np.unique(dec_group):
-            cand = np.unique(comp[dec[dec_group == grp]])
-            is_main[cand[np.argmax(sizes[cand])]] = True
+        for grp in range(lay.groups):
+            in_grp = comp[dec[dec_group == grp]]
+            if len(in_grp):
+                is_main[np.argmax(np.bincount(in_grp, minlength=len(sizes)))] = True
         if grid.pts is not None and grid.spacing_px > 0 and not is_main.all():
             main_dec = is_main[comp[dec]] & (sizes[comp[dec]] >= p.min_component)
             others_dec = dec[~is_main[comp[dec]] & keep[dec]]

@@ -121,7 +121,7 @@ def _combine(forward: np.ndarray, backward: np.ndarray, fallback: np.ndarray) ->
 
 
 def _smooth(vec: np.ndarray, nbr4: np.ndarray) -> np.ndarray:
-    """Median of a per-glyph vector and its found 4-neighbours' (robust to one bad one)."""
+    """Median of per-glyph vectors (N, D) and their found 4-neighbours' (robust to one bad one)."""
     stack = np.concatenate([vec[:, None, :], np.where((nbr4 >= 0)[..., None],
                                                       vec[np.maximum(nbr4, 0)], np.nan)], axis=1)
     srt = np.sort(stack, axis=1)                       # NaNs sort last
@@ -165,8 +165,8 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
                     axis=1)
     # Smooth them over the 4-neighbourhood (a median: one wrong link does not matter).
     for _ in range(p.smooth_iterations):
-        col_vec = _smooth(col_vec, nbr4)
-        row_vec = _smooth(row_vec, nbr4)
+        both = _smooth(np.concatenate([col_vec, row_vec], axis=1), nbr4)
+        col_vec, row_vec = both[:, :2], both[:, 2:]
     nbr = _assign(pts, disp, idx, valid, col_vec, row_vec, p)
     return Grid(nbr, col_vec, row_vec, spacing, pts)
 
