@@ -159,7 +159,8 @@ def through_ros(args: argparse.Namespace) -> int:
                 continue
             parts.setdefault((m.header.stamp.sec, m.header.stamp.nanosec), {})[key] = m
         frames += [p for _, p in sorted(parts.items()) if len(p) == 4]
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    log = open(args.node_log, "w") if args.node_log else subprocess.DEVNULL
+    proc = subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT)
     rclpy.init(domain_id=domain)
     node = Node("bench_pipeline")
     pubs = {k: node.create_publisher(Image if k.startswith("img") else CameraInfo,
@@ -237,6 +238,7 @@ def main() -> int:
     p.add_argument("--rate", type=float, default=30.0, help="--ros input rate, Hz")
     p.add_argument("--seconds", type=float, default=10.0, help="--ros measured duration")
     p.add_argument("--warmup-frames", type=int, default=10, help="--ros unmeasured frames")
+    p.add_argument("--node-log", default="", help="--ros: write the decoder's output here")
     args = p.parse_args()
     if args.ros:
         return through_ros(args)

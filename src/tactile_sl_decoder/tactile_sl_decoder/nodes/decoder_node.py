@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
@@ -72,6 +73,10 @@ class DecoderNode(Node):
         self.declare_parameter("sync_slop", 0.0, _d(
             "Seconds by which left/right stamps may differ when no exactly equal stamp "
             "exists (0 = exact stamps only, the contract's stereo convention)."))
+        self.declare_parameter("input_depth", 2, _d(
+            "QoS history depth of the input subscriptions (sensor data, best effort). Small "
+            "keeps latency low when the node falls behind: older frames are replaced by newer "
+            "ones in the middleware instead of queueing up."))
         self.declare_parameter("queue_size", 5, _d(
             "Unpaired messages kept per side while waiting for the stereo partner."))
         self.declare_parameter("max_age", 0.5, _d(
@@ -124,10 +129,14 @@ class DecoderNode(Node):
         self.warn_period = float(gp("warn_period").value)
         self._last_warn: dict[str, float] = {}
         self.info: dict[str, Any] = {"left": None, "right": None}
-        self.stats = {"frames": 0, "skipped": 0, "dropped": 0, "points": 0}
+        self.stats = {"frames": 0, "skipped": 0, "dropped": 0, "points": 0, "left": 0,
+                      "right": 0}
         self._proc_ms: list[float] = []
 
-        sensor = qos_profile_sensor_data
+        sensor = QoSProfile(history=HistoryPolicy.KEEP_LAST,
+                            depth=max(1, int(gp("input_depth").value)),
+                            reliability=qos_profile_sensor_data.reliability,
+                            durability=qos_profile_sensor_data.durability)
         out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
                              reliability=ReliabilityPolicy.RELIABLE)
         self.pub_points = self.create_publisher(PointCloud2, "points", out_qos)
@@ -166,6 +175,7 @@ class DecoderNode(Node):
         self.info[side] = msg
 
     def _on_frame(self, side: str, msg: Any) -> None:
+        self.stats[side] += 1
         ev = self.sync.add(side, stamp_ns(msg.header), msg)
         for s, stamp, reason in ev.dropped:
             self.stats["dropped"] += 1
@@ -213,6 +223,7 @@ class DecoderNode(Node):
             timing = (f"; last period: median {np.median(ms):.1f} ms, max {ms.max():.1f} ms "
                       f"per frame")
         self.get_logger().info(
+            f"received {self.stats['left']} left / {self.stats['right']} right, "
             f"{self.stats['frames']} frames decoded, {self.stats['skipped']} skipped, "
             f"{self.stats['dropped']} unpaired dropped{timing}")
         self._proc_ms = []
@@ -272,7 +283,7 @@ def main(args: list[str] | None = None) -> None:
         logger = node.get_logger() if node is not None else rclpy.logging.get_logger("decoder")
         logger.fatal(str(exc))
         raise SystemExit(1) from None
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         if node is not None:
