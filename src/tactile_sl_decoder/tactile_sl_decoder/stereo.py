@@ -21,7 +21,7 @@ import numpy as np
 
 from tactile_sl_camera.camera_info import CameraCalibration, CameraInfoError, calibration_from_msg
 
-UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-14)
+UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-12)
 
 
 @dataclass
