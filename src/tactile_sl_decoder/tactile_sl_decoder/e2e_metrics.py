@@ -284,3 +284,73 @@ def e2e_section(args: Any, bags: list[Path]) -> str:
             "frames": [dict(bag=name, **f.summary()) for name, f in per_frame]}, indent=1))
         print(f"(end-to-end figures also in {target})", file=out)
     return out.getvalue().rstrip("\n")
+
+
+# ---------------------------------------------------------------------- demo pictures
+
+CLASS_COLOURS_BGR = {0: (60, 60, 230), 1: (60, 200, 60), 2: (230, 140, 40)}
+UNKNOWN_COLOUR_BGR = (160, 160, 160)
+
+
+def render_overlay(gray: np.ndarray, glyphs: Any, label_every: int = 4) -> np.ndarray:
+    """BGR picture of one image with its glyphs coloured by class and cells annotated.
+
+    ``glyphs`` has ``u, v, label, row, col`` arrays (a pipeline ``Glyphs`` or the result of
+    ``glyphs_from_symbol_array`` on a ``symbols_decoded`` message). Decoded glyphs get a
+    filled dot, undecoded ones a ring; every cell whose row and column are multiples of
+    ``label_every`` is written as ``row,col``.
+    """
+    import cv2
+
+    img = cv2.cvtColor(np.ascontiguousarray(gray, np.uint8), cv2.COLOR_GRAY2BGR)
+    u = np.asarray(glyphs.u, np.float64)
+    v = np.asarray(glyphs.v, np.float64)
+    label = np.asarray(glyphs.label)
+    row = np.asarray(glyphs.row)
+    col = np.asarray(glyphs.col)
+    for i in range(len(u)):      # drawing only (no per-glyph work in the pipeline)
+        colour = CLASS_COLOURS_BGR.get(int(label[i]), UNKNOWN_COLOUR_BGR)
+        centre = (int(round(u[i])), int(round(v[i])))
+        cv2.circle(img, centre, 3, colour, -1 if row[i] >= 0 else 1, cv2.LINE_AA)
+        if row[i] >= 0 and row[i] % label_every == 0 and col[i] % label_every == 0:
+            cv2.putText(img, f"{row[i]},{col[i]}", (centre[0] + 4, centre[1] - 4),
+                        cv2.FONT_HERSHEY_PLAIN, 0.8, (0, 255, 255), 1, cv2.LINE_AA)
+    return img
+
+
+def render_cloud(points: np.ndarray | Any, size: tuple[int, int] = (640, 480)) -> np.ndarray:
+    """BGR picture of a cloud seen from the cameras; colour = height above the pad's plane.
+
+    The pad is tilted with respect to the (converging) cameras, so the colour is the signed
+    distance to the cloud's least-squares plane: red is pressed towards the cameras, blue
+    away; the range is written in the corner, in millimetres.
+    """
+    import cv2
+
+    pts = points if isinstance(points, np.ndarray) else cloud_to_arrays(points)
+    w, h = size
+    img = np.full((h, w, 3), 255, np.uint8)
+    if len(pts) < 3:
+        cv2.putText(img, f"{len(pts)} points", (10, 30), cv2.FONT_HERSHEY_SIMPLEX, 0.8,
+                    (0, 0, 0), 2)
+        return img
+    xyz = np.column_stack([pts["x"], pts["y"], pts["z"]]).astype(np.float64)
+    centre = xyz.mean(axis=0)
+    normal = np.linalg.svd(xyz - centre, full_matrices=False)[2][2]
+    normal = normal if normal[2] < 0 else -normal          # towards the cameras
+    height = (xyz - centre) @ normal
+    x, y = xyz[:, 0], xyz[:, 1]
+    margin = 20
+    span = max(np.ptp(x), np.ptp(y), 1e-9)
+    scale = (min(w, h - 30) - 2 * margin) / span
+    px = (margin + (x - x.min()) * scale).astype(int)
+    py = (margin + (y - y.min()) * scale).astype(int)
+    lim = max(float(np.abs(height).max()), 1e-9)
+    t = np.clip(0.5 + 0.5 * height / lim, 0, 1)
+    colours = cv2.applyColorMap((255 * t).astype(np.uint8).reshape(-1, 1), cv2.COLORMAP_JET)
+    for i in range(len(px)):     # drawing only
+        cv2.circle(img, (int(px[i]), int(py[i])), 4, tuple(int(c) for c in colours[i, 0]), -1)
+    cv2.putText(img, f"{len(pts)} points; height vs plane {-1e3 * lim:+.3f}..{1e3 * lim:+.3f}"
+                f" mm (red = towards cameras)", (10, h - 10), cv2.FONT_HERSHEY_PLAIN, 1.0,
+                (0, 0, 0), 1, cv2.LINE_AA)
+    return img

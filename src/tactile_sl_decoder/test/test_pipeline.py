@@ -272,3 +272,17 @@ def test_shipped_pattern_decodes_and_matches_the_printed_artwork():
     assert spec.window == tuple(meta["window"]) and spec.min_hamming == meta["min_hamming"]
     pipe = StereoPipeline(spec)
     assert len(pipe.codebook.windows) == (spec.array.shape[0] - 2) * (spec.array.shape[1] - 2)
+
+
+def test_demo_pictures(scene):
+    from tactile_sl_decoder.e2e_metrics import render_cloud, render_overlay
+
+    pipe = StereoPipeline(PATTERN)
+    gl, _ = _glyphs(scene, scene.uv_l, 5)
+    gr, _ = _glyphs(scene, scene.uv_r, 6)
+    res = pipe.process_symbols(gl, gr, scene.info_l, scene.info_r)
+    over = render_overlay(np.zeros((480, 640), np.uint8), res.left)
+    assert over.shape == (480, 640, 3) and over.any()
+    cloud = render_cloud(res.points)
+    assert cloud.shape == (480, 640, 3) and (cloud != 255).any()
+    assert render_cloud(res.points[:0]).shape == (480, 640, 3)
