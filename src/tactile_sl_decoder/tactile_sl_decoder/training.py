@@ -195,13 +195,18 @@ def augment(x: Any, gen: Any) -> Any:
     import torch.nn.functional as F
 
     n = x.shape[0]
-    angle = (torch.rand(n, generator=gen) - 0.5) * (2 * math.radians(10))
-    scale = 1.0 + (torch.rand(n, generator=gen) - 0.5) * 0.24
-    aniso = 1.0 + (torch.rand(n, generator=gen) - 0.5) * 0.16
+    angle = (torch.rand(n, generator=gen) - 0.5) * (2 * math.radians(15))
+    scale = 1.0 + (torch.rand(n, generator=gen) - 0.5) * 0.3
+    aniso = 1.0 + (torch.rand(n, generator=gen) - 0.5) * 0.3
+    shear = (torch.rand(n, generator=gen) - 0.5) * 0.3
     shift = (torch.rand(n, 2, generator=gen) - 0.5) * (2 * 1.2 / 9.0)  # +-1.2 px
     cos, sin = torch.cos(angle) / scale, torch.sin(angle) / scale
-    theta = torch.stack([torch.stack([cos * aniso, -sin, shift[:, 0]], 1),
-                         torch.stack([sin, cos / aniso, shift[:, 1]], 1)], 1)
+    # rotation @ (anisotropic scale + shear): the local stretch of a deformed pad
+    a11, a12, a21, a22 = aniso, shear, torch.zeros(n), 1.0 / aniso
+    theta = torch.stack([torch.stack([cos * a11 - sin * a21, cos * a12 - sin * a22,
+                                      shift[:, 0]], 1),
+                         torch.stack([sin * a11 + cos * a21, sin * a12 + cos * a22,
+                                      shift[:, 1]], 1)], 1)
     grid = F.affine_grid(theta, list(x.shape), align_corners=False)
     x = F.grid_sample(x, grid, mode="bilinear", padding_mode="border", align_corners=False)
     # photometric: gamma, contrast, offset, blur, noise (patches are 0..255 here)

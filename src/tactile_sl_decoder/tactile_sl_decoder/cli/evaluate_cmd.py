@@ -99,6 +99,10 @@ def symbol_sections(args: argparse.Namespace, bags: list[Path]) -> str:
     out.append(format_table(classification_section(shown), "== classification =="))
     if totals:
         overall = aggregate(all_rows, "all scenes")
+        if overall.matched > 100 and overall.accuracy < 0.6:
+            out.append(f"WARNING: accuracy {100 * overall.accuracy:.1f} % is near chance: the "
+                       f"pattern ({source}) is probably not the one these bags were "
+                       "rendered from; pass the right one with --pattern\n")
         out.append(format_table(extraction_section(totals + [overall]),
                                 "== extraction, per scene =="))
         out.append(format_table(classification_section(totals + [overall]),

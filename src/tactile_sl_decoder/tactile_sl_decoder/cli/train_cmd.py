@@ -18,10 +18,10 @@ def register(subparsers: Any) -> None:
         "extract glyphs, label them from the ground truth and train the LeNet classifier. "
         "Held-out frames use other seeds and other indenter kinds. Writes the weights "
         "(default: the ones the package ships) and a model card next to them.")
-    p.add_argument("--frames", type=int, default=50, help="training stereo frames (default 50)")
+    p.add_argument("--frames", type=int, default=80, help="training stereo frames (default 80)")
     p.add_argument("--val-frames", type=int, default=16,
                    help="held-out stereo frames (default 16)")
-    p.add_argument("--epochs", type=int, default=8, help="passes over the data (default 8)")
+    p.add_argument("--epochs", type=int, default=12, help="passes over the data (default 12)")
     p.add_argument("--seed", type=int, default=1, help="seed of data and training (default 1)")
     p.add_argument("--threshold", type=float, default=DEFAULT_THRESHOLD,
                    help=f"confidence threshold stored with the weights ({DEFAULT_THRESHOLD})")
@@ -80,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
             "noise, vignetting, light position, gradient, gamma, exposure and shadows (30 % "
             "harsh). Glyphs found by `extract_symbols`, labelled by the nearest ground-truth "
             "cell within a quarter spacing (value read from the artwork). Training adds patch "
-            "augmentation: rotation +-10 deg, scale +-12 %, anisotropy +-8 %, shift +-1.2 px, "
+            "augmentation: rotation +-15 deg, scale +-15 %, anisotropy +-15 %, shear +-0.15, "
+            "shift +-1.2 px, "
             "gamma, contrast, offset, blur, noise.")
     card.write_text(model_card(result, note, data_seconds))
     print(f"wrote {out} ({out.stat().st_size} bytes) and {card}")
