@@ -49,7 +49,7 @@ class DecodeParams:
     retry_confidence: float = 0.9   # erase the least confident label (if below) and retry
     min_votes: int = 2              # agreeing window votes needed to accept a glyph's cell
     vote_ratio: float = 0.7         # the winning cell's share of all votes for the glyph
-    grow_iterations: int = 3        # passes extending decoded regions to undecided glyphs
+    grow_iterations: int = 12       # passes extending decoded regions to undecided glyphs
     grow_min_agree: int = 2         # decided neighbours that must agree to grow a glyph
     grow_min_agree_mismatch: int = 4  # ... when its own label contradicts that cell
     min_component: int = 16         # smallest consistent island of decoded glyphs kept
