@@ -116,6 +116,8 @@ class PipelineParams:
     extraction: Any = None          # tactile_sl_decoder.extraction.ExtractionParams
     threads: int = 1                # >1: extract left and right concurrently
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
+    classifier_weights: str | None = None      # loaded when needed; None = shipped weights
+    classifier_threshold: float | None = None  # None = the threshold stored with the weights
 
 
 @dataclass
@@ -185,12 +187,16 @@ class StereoPipeline:
             self._extractor = extract_symbols
         return self._extractor(gray, self.params.extraction)
 
-    def _classifier(self) -> Any:
+    def load_classifier(self) -> Any:
+        """The classifier, loaded on first use from ``params.classifier_weights``."""
         if self.classifier is None:
             from tactile_sl_decoder.classifier import Classifier
 
-            self.classifier = Classifier.load()
+            self.classifier = Classifier.load(self.params.classifier_weights,
+                                              self.params.classifier_threshold)
         return self.classifier
+
+    _classifier = load_classifier
 
     def _map(self, fn: Callable[[Any], Any], a: Any, b: Any) -> tuple[Any, Any]:
         if self._pool is None:

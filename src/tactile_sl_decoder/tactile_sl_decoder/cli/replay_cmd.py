@@ -57,14 +57,10 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         pattern = PatternSpec.load(args.pattern)
-        classifier = None
-        if args.classifier:
-            from tactile_sl_decoder.classifier import Classifier
-            classifier = Classifier.load(args.classifier)
-        params = PipelineParams()
+        params = PipelineParams(classifier_weights=args.classifier)
         params.decode.mirrored = bool(args.mirrored)
-        pipeline = StereoPipeline(pattern, classifier, params)
-        pipeline._classifier()       # load weights now: fail before touching the output
+        pipeline = StereoPipeline(pattern, None, params)
+        pipeline.load_classifier()    # fail before touching the output
         total = count_bag_frames(args.input, args.namespace)
     except (BagError, PatternError, OSError, ValueError) as exc:
         print(f"tactile-sl replay: {exc}", file=sys.stderr)

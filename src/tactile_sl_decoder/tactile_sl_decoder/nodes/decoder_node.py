@@ -100,6 +100,10 @@ class DecoderNode(Node):
             "Largest rectified reprojection error of a stereo pair (epipolar gate), px."))
         self.declare_parameter("warn_period", 5.0, _d(
             "Seconds between two warnings of the same kind (throttling)."))
+        self.declare_parameter("classifier_threshold", -1.0, _d(
+            "Confidence below which a glyph's label is unknown (255); < 0 = the value stored "
+            "with the weights (input=images, or unlabelled symbols)."))
+        extraction = self._extraction_params()
 
         gp = self.get_parameter
         self.input_mode = str(gp("input").value)
@@ -111,15 +115,16 @@ class DecoderNode(Node):
         params.decode.min_votes = int(gp("min_votes").value)
         params.decode.min_component = int(gp("min_component").value)
         params.stereo.max_reprojection_px = float(gp("max_reprojection_px").value)
+        params.extraction = extraction
         params.threads = int(gp("threads").value)
         params.cpu_threads = int(gp("cpu_threads").value)
         pattern = PatternSpec.load(str(gp("pattern_file").value) or None)
-        classifier = None
+        threshold = float(gp("classifier_threshold").value)
+        params.classifier_weights = str(gp("classifier_weights").value) or None
+        params.classifier_threshold = threshold if threshold >= 0 else None
+        self.pipeline = StereoPipeline(pattern, None, params)
         if self.input_mode == "images":
-            from tactile_sl_decoder.classifier import Classifier
-
-            classifier = Classifier.load(str(gp("classifier_weights").value) or None)
-        self.pipeline = StereoPipeline(pattern, classifier, params)
+            self.pipeline.load_classifier()    # fail at start, not on the first frame
         self.sync = StereoSync(int(float(gp("sync_slop").value) * 1e9),
                                int(gp("queue_size").value),
                                int(float(gp("max_age").value) * 1e9))
@@ -161,6 +166,27 @@ class DecoderNode(Node):
             f"decoder ready: input={self.input_mode}, pattern {pattern.array.shape[0]}x"
             f"{pattern.array.shape[1]} (window {pattern.window[0]}x{pattern.window[1]}, "
             f"h={pattern.min_hamming}), mirrored={params.decode.mirrored}")
+
+    def _extraction_params(self) -> Any:
+        """One ``extraction.<field>`` parameter per ExtractionParams field.
+
+        Same meanings and defaults as the symbol_extractor node's parameters.
+        """
+        import dataclasses
+
+        from tactile_sl_decoder.extraction import ExtractionParams
+
+        defaults = ExtractionParams()
+        values = {}
+        for f in dataclasses.fields(defaults):
+            default = getattr(defaults, f.name)
+            if not isinstance(default, (bool, int, float, str)):
+                continue
+            name = f"extraction.{f.name}"
+            self.declare_parameter(name, default, _d(
+                f"Glyph extraction (input=images): {f.name}; see the symbol_extractor node."))
+            values[f.name] = type(default)(self.get_parameter(name).value)
+        return dataclasses.replace(defaults, **values)
 
     # ------------------------------------------------------------------ callbacks
 
