@@ -208,7 +208,9 @@ def patch_centroid_offset(patches: np.ndarray, dark: bool = True,
     else:
         weight -= mean[:, None]
     np.maximum(weight, 0.0, out=weight)
-    moments = weight @ _centroid_kernels(size, radius)  # one thin product: (n, 3)
+    # one thin product (n, 324) x (324, 3); OpenCV's gemm stays on the calling thread,
+    # where a threaded BLAS can spin and stall on a busy machine
+    moments = cv2.gemm(weight, _centroid_kernels(size, radius), 1.0, None, 0.0)
     total = np.maximum(moments[:, 0], 1e-6)
     return moments[:, 1] / total, moments[:, 2] / total
 

@@ -120,6 +120,12 @@ def test_chain_labels_images_and_survives_bad_input(tmp_path):
         assert all(p.poll() is None for p in procs)
         ex.shutdown()
         node.destroy_node()
+    except AssertionError as exc:  # say what the nodes said
+        for f in logs.values():
+            f.flush()
+        text = "\n".join(f"--- {n}\n{(tmp_path / f'{n}.log').read_text()[-3000:]}"
+                         for n in logs)
+        raise AssertionError(f"{exc}\n{text}") from None
     finally:
         rclpy.shutdown(context=context)
         for p in procs:

@@ -33,6 +33,11 @@ class SymbolClassifierNode(Node):
             "with the weights (0.9 for the shipped ones)."))
         self.declare_parameter("keep_patches", False, ParameterDescriptor(
             description="Forward the patches (debugging); the decoder does not need them."))
+        self.declare_parameter("threads", 1, ParameterDescriptor(
+            description="torch CPU threads for inference (1 meets the budget on one core)."))
+        import torch
+
+        torch.set_num_threads(max(1, int(self.get_parameter("threads").value)))
         weights = str(self.get_parameter("weights").value) or None
         threshold = float(self.get_parameter("threshold").value)
         self.classifier = Classifier.load(weights, threshold if threshold >= 0 else None)

@@ -13,6 +13,7 @@ import dataclasses
 import time
 from typing import Any
 
+import cv2
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
@@ -65,6 +66,9 @@ class SymbolExtractorNode(Node):
         self.declare_parameter("publish_patches", True, ParameterDescriptor(
             description="Send the 18x18 patches (the classifier node needs them)."))
         self.publish_patches = bool(self.get_parameter("publish_patches").value)
+        self.declare_parameter("threads", 1, ParameterDescriptor(
+            description="OpenCV threads (1: one image uses one core; run one node per camera)."))
+        cv2.setNumThreads(max(1, int(self.get_parameter("threads").value)))
         self.pub = self.create_publisher(SymbolArray, "symbols", QoSProfile(depth=10))
         self.sub = self.create_subscription(Image, "image", self.on_image,
                                             qos_profile_sensor_data)
