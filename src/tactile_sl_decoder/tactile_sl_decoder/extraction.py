@@ -201,16 +201,16 @@ def patch_centroid_offset(patches: np.ndarray, dark: bool = True,
     of ``radius`` patch sides, which holds the glyph but not its neighbours.
     """
     n, size = patches.shape[0], patches.shape[1]
-    weight = patches.reshape(n, size * size).astype(np.float32)
-    mean = weight.mean(axis=1)
-    if dark:
-        np.subtract(mean[:, None], weight, out=weight)
-    else:
-        weight -= mean[:, None]
-    np.maximum(weight, 0.0, out=weight)
+    flat = np.ascontiguousarray(patches.reshape(n, size * size))
+    # uint8 arithmetic: the (rounded) patch mean, then the saturating difference is exactly
+    # max(mean - grey, 0) (or max(grey - mean, 0)), at a quarter of the memory traffic
+    mean = cv2.reduce(flat, 1, cv2.REDUCE_AVG, dtype=cv2.CV_8U)
+    mean = np.repeat(mean, size * size, axis=1)
+    weight = cv2.subtract(mean, flat) if dark else cv2.subtract(flat, mean)
     # one thin product (n, 324) x (324, 3); OpenCV's gemm stays on the calling thread,
     # where a threaded BLAS can spin and stall on a busy machine
-    moments = cv2.gemm(weight, _centroid_kernels(size, radius), 1.0, None, 0.0)
+    moments = cv2.gemm(weight.astype(np.float32), _centroid_kernels(size, radius), 1.0, None,
+                       0.0)
     total = np.maximum(moments[:, 0], 1e-6)
     return moments[:, 1] / total, moments[:, 2] / total
 
