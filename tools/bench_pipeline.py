@@ -25,11 +25,36 @@ import os
 import pathlib
 import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
+FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <transport_descriptors>
+    <transport_descriptor>
+      <transport_id>shm_large</transport_id>
+      <type>SHM</type>
+      <segment_size>{size}</segment_size>
+    </transport_descriptor>
+    <transport_descriptor>
+      <transport_id>udp</transport_id>
+      <type>UDPv4</type>
+    </transport_descriptor>
+  </transport_descriptors>
+  <participant profile_name="default_participant" is_default_profile="true">
+    <rtps>
+      <userTransports>
+        <transport_id>shm_large</transport_id>
+        <transport_id>udp</transport_id>
+      </userTransports>
+      <useBuiltinTransports>false</useBuiltinTransports>
+    </rtps>
+  </participant>
+</profiles>
+"""
 
 
 def _bags(args: argparse.Namespace) -> list[str]:
@@ -140,6 +165,13 @@ def through_ros(args: argparse.Namespace) -> int:
     exe = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder" / "decoder"
     domain = 150 + os.getpid() % 50
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    if args.shm_segment_mb > 0:
+        # Fast DDS's default 512 KB shared-memory segment holds one 640x480 image: the left
+        # image of a frame is recycled when the right one is written right after it.
+        profile = pathlib.Path(tempfile.mkdtemp()) / "fastdds.xml"
+        profile.write_text(FASTDDS_PROFILE.format(size=int(args.shm_segment_mb * 2**20)))
+        env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
+        os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)   # this process too
     cmd = [str(exe), "--ros-args", "-r", "__ns:=/tactile", "-p", f"threads:={args.threads}",
            "-p", f"cpu_threads:={args.cpu_threads}", "-p", "publish_symbols:=false"]
     if args.pattern:
@@ -197,6 +229,8 @@ def through_ros(args: argparse.Namespace) -> int:
                 m = fr[key]
                 m.header.stamp.sec, m.header.stamp.nanosec = stamp
                 pubs[key].publish(m)
+                if key == "img_left" and args.gap_ms > 0:
+                    time.sleep(args.gap_ms / 1e3)
             if i >= args.warmup_frames:
                 sent.append(now)
         drain = time.monotonic() + 2.0
@@ -212,7 +246,8 @@ def through_ros(args: argparse.Namespace) -> int:
     print(f"through ROS (loopback DDS): {len(sent)} stereo frames at {args.rate:.0f} Hz, "
           f"threads={args.threads}, cpu_threads={args.cpu_threads}, load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
-    print(f"clouds received {len(lat)}, frames without a cloud (dropped) {dropped}")
+    print(f"clouds received {len(lat)}, frames without a cloud (dropped) {dropped}; "
+          f"Fast DDS SHM segment {args.shm_segment_mb or 0.5:g} MB")
     if len(lat):
         print(f"latency stamp -> cloud received: median {np.median(lat):.1f} ms, "
               f"p99 {np.percentile(lat, 99):.1f} ms, max {lat.max():.1f} ms; "
@@ -239,6 +274,11 @@ def main() -> int:
     p.add_argument("--seconds", type=float, default=10.0, help="--ros measured duration")
     p.add_argument("--warmup-frames", type=int, default=10, help="--ros unmeasured frames")
     p.add_argument("--node-log", default="", help="--ros: write the decoder's output here")
+    p.add_argument("--shm-segment-mb", type=float, default=0.0,
+                   help="--ros: Fast DDS shared-memory segment size (0 = middleware default, "
+                   "512 KB, which loses left images of back-to-back stereo pairs)")
+    p.add_argument("--gap-ms", type=float, default=0.0,
+                   help="--ros: pause between publishing the left and the right image")
     args = p.parse_args()
     if args.ros:
         return through_ros(args)
