@@ -45,6 +45,7 @@ TABLE_I: tuple[TableRow, ...] = (
     TableRow(6, (3, 3), 3, (100, 100), "published size"),
     TableRow(2, (7, 7), 3, (80, 60), "published size (h=3 chosen)"),
     TableRow(2, (7, 7), 3, (100, 100), "published size (h=3 chosen)"),
+    TableRow(2, (7, 7), 13, (100, 100), "harder: h=13"),
 )
 
 
