@@ -153,7 +153,9 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     spacing = float(np.median(nn[np.isfinite(nn)])) if np.isfinite(nn).any() else 0.0
     if not np.isfinite(spacing) or spacing <= 0:
         return _empty(n, pts)
-    col_dir = _global_frame(disp[:, :4].reshape(-1, 2), dist[:, :4].reshape(-1), spacing)
+    step = max(1, n // 400)                           # a few hundred glyphs are plenty
+    col_dir = _global_frame(disp[::step, :4].reshape(-1, 2), dist[::step, :4].reshape(-1),
+                            spacing)
     row_dir = np.array([-col_dir[1], col_dir[0]])     # +v side of the column direction
 
     # Local lattice vectors, following stretching: the best-aligned neighbour each way.
@@ -183,13 +185,12 @@ def _assign(pts: np.ndarray, disp: np.ndarray, idx: np.ndarray, valid: np.ndarra
     pred = (OFFSETS[others, 1][None, :, None] * col_vec[:, None, :]
             + OFFSETS[others, 0][None, :, None] * row_vec[:, None, :]).astype(np.float32)
     d32 = disp.astype(np.float32)
+    d32[~valid] = 1e6                       # missing candidates: never within tolerance
     # Squared distances |disp - pred|^2, (N, 8, K), float32 elementwise (pixels: plenty).
     du = d32[:, None, :, 0] - pred[:, :, None, 0]
     dv = d32[:, None, :, 1] - pred[:, :, None, 1]
     err = du * du
     err += dv * dv
-    if not valid.all():
-        err[~np.broadcast_to(valid[:, None, :], err.shape)] = np.inf
     k = np.argmin(err, axis=2)                                          # (N, 8)
     best = np.take_along_axis(err, k[..., None], axis=2)[..., 0]
     found = np.take_along_axis(idx, k, axis=1)
