@@ -286,3 +286,20 @@ def test_demo_pictures(scene):
     cloud = render_cloud(res.points)
     assert cloud.shape == (480, 640, 3) and (cloud != 255).any()
     assert render_cloud(res.points[:0]).shape == (480, 640, 3)
+
+
+def test_e2e_section_reports_per_frame_and_per_bag(tmp_path):
+    """The `tactile-sl evaluate` section runs the pipeline over a bundled bag."""
+    import argparse
+    import json
+
+    from tactile_sl_decoder.e2e_metrics import e2e_section
+
+    bag = REPO / "bags" / "no_contact.mcap"
+    args = argparse.Namespace(pattern=None, weights=None, namespace="/tactile", max_frames=1,
+                              totals_only=False, json=tmp_path / "ev.json")
+    text = e2e_section(args, [bag])
+    assert "coverage" in text and "no_contact" in text
+    doc = json.loads((tmp_path / "ev.e2e.json").read_text())
+    assert doc["bags"][0]["frames"] == 1 and doc["bags"][0]["visible"] > 500
+    assert len(doc["frames"]) == 1 and doc["frames"][0]["bag"] == "no_contact"
