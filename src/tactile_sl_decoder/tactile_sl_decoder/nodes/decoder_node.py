@@ -230,6 +230,11 @@ class DecoderNode(Node):
             return
         self.stats["frames"] += 1
         self.stats["points"] += len(result.points)
+        if len(result.points) == 0 and min(len(result.left), len(result.right)) >= 50:
+            self.warn("nothing-decoded",
+                      f"frame {stamp[0]}.{stamp[1]:09d}: {len(result.left)} + "
+                      f"{len(result.right)} glyphs found but no cell decoded in both images; "
+                      f"check pattern_file (is it the printed pattern?) and mirrored")
         if len(result.points) or self.publish_empty:
             frame_id = result.frame_id or str(left_msg.header.frame_id)
             self.pub_points.publish(make_cloud(result, stamp, frame_id))
