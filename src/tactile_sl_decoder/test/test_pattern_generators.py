@@ -20,6 +20,7 @@ SMALL = [
     (Constraints(3, (3, 3), 1), (20, 18)),
     (Constraints(2, (3, 4), 1), (9, 10)),
     (Constraints(5, (3, 3), 3), (16, 16)),
+    (Constraints(4, (3, 3), 3), (14, 14)),
 ]
 
 
@@ -70,9 +71,29 @@ def test_impossible_size_fails_with_reason(name):
     assert info.value.reason
 
 
-def test_linear_rejects_non_prime_alphabet():
-    with pytest.raises(GenerationFailed, match="prime"):
+def test_linear_rejects_non_prime_power_alphabet():
+    with pytest.raises(GenerationFailed, match="prime-power"):
         linear.generate(Constraints(6, (3, 3), 3), 10, 10)
+
+
+def test_sizes_beyond_the_code_bound_fail_immediately():
+    with pytest.raises(GenerationFailed, match="impossible.*1600 windows.*937"):
+        generate("dfs", Constraints(3, (3, 3), 3), 42, 42, time_limit=60)
+
+
+@pytest.mark.parametrize("q", [4, 8])
+def test_extension_fields_and_their_m_sequences(q):
+    F = linear.field(q)
+    for a in range(1, q):  # every non-zero element has an inverse, mul distributes
+        assert sum(F.mul[a][b] == 1 for b in range(q)) == 1
+        for b in range(q):
+            for c in range(q):
+                assert F.mul[a][F.add[b][c]] == F.add[F.mul[a][b]][F.mul[a][c]]
+    poly = linear.primitive_polynomials(q, 3, 1)[0]
+    seq = linear.m_sequence(poly, q)
+    ext = np.concatenate([seq, seq[:2]])
+    assert len(seq) == q ** 3 - 1
+    assert len({tuple(ext[i:i + 3]) for i in range(len(seq))}) == q ** 3 - 1
 
 
 def test_unknown_algorithm():

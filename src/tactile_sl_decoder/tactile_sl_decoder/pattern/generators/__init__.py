@@ -18,14 +18,14 @@ AUTO = "auto"
 
 def generate_auto(constraints: Constraints, rows: int, cols: int, seed: int = 0,
                   time_limit: float | None = 60.0, progress: bool = False) -> GenerationResult:
-    """Our best: the algebraic construction when it applies, else backtracking search.
+    """Our best: the algebraic construction when GF(k) exists, else backtracking search.
 
     The linear construction is tried first with up to a quarter of the budget (it either
     finds a fold quickly or not at all); the search gets the rest.
     """
     budget = Budget(time_limit)
     reasons = []
-    if linear.is_prime(constraints.symbols):
+    if linear.prime_power(constraints.symbols) is not None:
         share = None if time_limit is None else max(time_limit * 0.25, min(time_limit, 2.0))
         try:
             result = linear.generate(constraints, rows, cols, seed, share, progress)
@@ -55,7 +55,7 @@ GENERATORS: dict[str, Generator] = {
 """Every generator by its ``--algorithm`` name; the first is the default."""
 
 DESCRIPTIONS: dict[str, str] = {
-    AUTO: "ours, default: linear when k is prime and a fold fits, else dfs",
+    AUTO: "ours, default: linear when k is a prime power and a fold fits, else dfs",
     linear.NAME: "ours: m-sequence over GF(k) folded into the array (windows form a "
                  "linear code); reaches 728 windows (30x28) for k=3 3x3 h=3",
     dfs.NAME: "ours: depth-first search with backtracking, incremental window index, "
@@ -75,4 +75,13 @@ def generate(name: str, constraints: Constraints, rows: int, cols: int, seed: in
     except KeyError:
         raise ValueError(f"unknown algorithm {name!r}; choose from {', '.join(GENERATORS)}") \
             from None
+    from ..bounds import code_bounds
+
+    windows = constraints.window_count(rows, cols)
+    upper = code_bounds(constraints).upper
+    if windows > upper:
+        raise GenerationFailed(
+            f"impossible: a {rows}x{cols} array has {windows} windows but no code with "
+            f"{constraints.describe()} has more than {upper} words "
+            "(see `tactile-sl pattern bound`)")
     return func(constraints, rows, cols, seed=seed, time_limit=time_limit, progress=progress)

@@ -10,7 +10,8 @@ ternary code (729 words, the best known), so 728 windows fit exactly: a 30 x 28 
 
 The generator searches (seeded order) over primitive polynomials, fold strides and the
 two orientations for a fold whose windows are distinct, and keeps the first array that
-the exact verifier accepts. Only prime alphabets are supported (GF(p) arithmetic).
+the exact verifier accepts. Alphabets must be prime powers (k = 2, 3, 4, 5, 7, 8: GF(k)
+by tables); k = 6 has no field and is left to the search generators.
 """
 from __future__ import annotations
 
@@ -49,71 +50,139 @@ def _prime_factors(value: int) -> list[int]:
     return out
 
 
-def _polymulmod(a: list[int], b: list[int], f: list[int], p: int) -> list[int]:
-    """(a * b) mod f over GF(p); polynomials as coefficient lists, lowest degree first."""
+def prime_power(value: int) -> tuple[int, int] | None:
+    """(p, e) with value = p^e for a prime p, or None."""
+    for p in range(2, value + 1):
+        if value % p == 0:
+            e, rest = 0, value
+            while rest % p == 0:
+                rest //= p
+                e += 1
+            return (p, e) if rest == 1 and is_prime(p) else None
+    return None
+
+
+class Field:
+    """GF(q), q = p^e, as add/mul/neg tables over the integers 0..q-1.
+
+    For q prime the tables are plain arithmetic mod q; for q = p^e an element is a
+    polynomial over GF(p) in base-p digits, multiplied modulo a primitive polynomial.
+    """
+
+    def __init__(self, q: int) -> None:
+        pe = prime_power(q)
+        if pe is None:
+            raise ValueError(f"GF({q}) does not exist: {q} is not a prime power")
+        p, e = pe
+        self.q, self.p, self.e = q, p, e
+        if e == 1:
+            self.add = [[(a + b) % q for b in range(q)] for a in range(q)]
+            self.mul = [[(a * b) % q for b in range(q)] for a in range(q)]
+        else:
+            modulus = list(primitive_polynomials(p, e, 1)[0])
+
+            def digits(x: int) -> list[int]:
+                return [(x // p ** i) % p for i in range(e)]
+
+            def number(ds: list[int]) -> int:
+                return sum(v * p ** i for i, v in enumerate(ds))
+
+            base = Field(p)
+            self.add = [[number([(x + y) % p for x, y in zip(digits(a), digits(b))])
+                         for b in range(q)] for a in range(q)]
+            self.mul = [[number(_polymulmod(digits(a), digits(b), modulus, base))
+                         for b in range(q)] for a in range(q)]
+        self.neg = [next(b for b in range(q) if self.add[a][b] == 0) for a in range(q)]
+
+
+@lru_cache(maxsize=16)
+def field(q: int) -> Field:
+    """The (cached) field with q elements."""
+    return Field(q)
+
+
+def _polymulmod(a: list[int], b: list[int], f: list[int], F: Field) -> list[int]:
+    """(a * b) mod f over F; polynomials as coefficient lists, lowest degree first, f monic."""
+    add, mul, neg = F.add, F.mul, F.neg
     d = len(f) - 1
     prod = [0] * (len(a) + len(b) - 1)
     for i, x in enumerate(a):
         if x:
+            row = mul[x]
             for j, y in enumerate(b):
-                prod[i + j] = (prod[i + j] + x * y) % p
+                if y:
+                    prod[i + j] = add[prod[i + j]][row[y]]
     for i in range(len(prod) - 1, d - 1, -1):
         coef = prod[i]
         if coef:
-            for j in range(d + 1):  # f is monic: subtract coef * x^(i-d) * f
-                prod[i - d + j] = (prod[i - d + j] - coef * f[j]) % p
+            ncoef = mul[neg[coef]]
+            for j in range(d + 1):  # subtract coef * x^(i-d) * f
+                if f[j]:
+                    prod[i - d + j] = add[prod[i - d + j]][ncoef[f[j]]]
     return (prod[:d] + [0] * d)[:d]
 
 
-def _x_power(e: int, f: list[int], p: int) -> list[int]:
+def _x_power(e: int, f: list[int], F: Field) -> list[int]:
     d = len(f) - 1
     result = [1] + [0] * (d - 1)
-    base = ([0, 1] + [0] * d)[:d] if d > 1 else [(-f[0]) % p]
+    base = ([0, 1] + [0] * d)[:d] if d > 1 else [F.neg[f[0]]]
     while e:
         if e & 1:
-            result = _polymulmod(result, base, f, p)
-        base = _polymulmod(base, base, f, p)
+            result = _polymulmod(result, base, f, F)
+        base = _polymulmod(base, base, f, F)
         e >>= 1
     return result
 
 
-def is_primitive(f: list[int], p: int) -> bool:
-    """True when the monic polynomial f (lowest degree first) is primitive over GF(p)."""
+def is_primitive(f: list[int], q: int) -> bool:
+    """True when the monic polynomial f (lowest degree first) is primitive over GF(q)."""
+    F = field(q)
     d = len(f) - 1
     if f[0] == 0:
         return False
-    order = p ** d - 1
+    order = q ** d - 1
     one = [1] + [0] * (d - 1)
-    if _x_power(order, f, p) != one:
+    if _x_power(order, f, F) != one:
         return False
-    return all(_x_power(order // q, f, p) != one for q in _prime_factors(order))
+    return all(_x_power(order // r, f, F) != one for r in _prime_factors(order))
 
 
 @lru_cache(maxsize=64)
-def primitive_polynomials(p: int, d: int, limit: int = 256) -> tuple[tuple[int, ...], ...]:
-    """Up to ``limit`` primitive monic polynomials of degree d over GF(p), in a fixed order."""
+def primitive_polynomials(q: int, d: int, limit: int = 256) -> tuple[tuple[int, ...], ...]:
+    """Up to ``limit`` primitive monic polynomials of degree d over GF(q), in a fixed order."""
     found = []
-    for low in itertools.product(range(p), repeat=d):
+    for low in itertools.product(range(q), repeat=d):
         f = list(low[::-1]) + [1]
-        if is_primitive(f, p):
+        if is_primitive(f, q):
             found.append(tuple(f))
             if len(found) >= limit:
                 break
     return tuple(found)
 
 
-def m_sequence(f: tuple[int, ...], p: int) -> np.ndarray:
-    """One period of the maximal-length sequence of f, started from state 0...01.
+def m_sequence(f: tuple[int, ...], q: int) -> np.ndarray:
+    """One period of the maximal-length sequence of f over GF(q), started from 0...01.
 
-    s[t+d] = -sum_i f_i s[t+i] (mod p); a plain integer loop is fast enough here (the
-    period is at most :data:`MAX_PERIOD`, and realistic patterns need < 1e5 terms).
+    s[t+d] = -sum_i f_i s[t+i]; a plain integer loop is fast enough here (the period is
+    at most :data:`MAX_PERIOD`, and realistic patterns need < 1e5 terms).
     """
+    F = field(q)
     d = len(f) - 1
-    period = p ** d - 1
-    taps = [(i, (-c) % p) for i, c in enumerate(f[:d]) if (-c) % p]
+    period = q ** d - 1
+    if is_prime(q):
+        taps = [(i, (-c) % q) for i, c in enumerate(f[:d]) if (-c) % q]
+        s = [0] * (d - 1) + [1]
+        for t in range(period - d):
+            s.append(sum(coef * s[t + i] for i, coef in taps) % q)
+        return np.asarray(s[:period], dtype=np.uint8)
+    add, mul = F.add, F.mul
+    taps = [(i, mul[F.neg[c]]) for i, c in enumerate(f[:d]) if c]
     s = [0] * (d - 1) + [1]
     for t in range(period - d):
-        s.append(sum(coef * s[t + i] for i, coef in taps) % p)
+        acc = 0
+        for i, row in taps:
+            acc = add[acc][row[s[t + i]]]
+        s.append(acc)
     return np.asarray(s[:period], dtype=np.uint8)
 
 
@@ -203,8 +272,10 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
     """Find a verified folded m-sequence array of the requested size."""
     check_size(constraints, rows, cols)
     p = constraints.symbols
-    if not is_prime(p):
-        raise GenerationFailed(f"the linear construction needs a prime alphabet; k={p} is not")
+    if prime_power(p) is None:
+        raise GenerationFailed(
+            f"the linear construction needs a prime-power alphabet (a field GF(k)); k={p} is not")
+    poly_limit = 256 if is_prime(p) else 16
     windows = constraints.window_count(rows, cols)
     budget = Budget(time_limit, progress, NAME)
     rng = np.random.default_rng(seed)
@@ -219,7 +290,7 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
             break
         if degree > constraints.cells:
             break
-        polys = list(primitive_polynomials(p, degree))
+        polys = list(primitive_polynomials(p, degree, poly_limit))
         if not polys:
             continue
         # fold strides that keep the window exponents distinct; the smallest are the
