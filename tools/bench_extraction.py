@@ -86,7 +86,8 @@ def main() -> int:
     if args.bag:
         sets[os.path.basename(args.bag)] = bag_images(args.bag, 4)
     print(f"one core: torch threads {torch.get_num_threads()}, cv2 threads "
-          f"{cv2.getNumThreads()}, affinity {sorted(os.sched_getaffinity(0))}")
+          f"{cv2.getNumThreads()}, affinity {sorted(os.sched_getaffinity(0))}; machine load "
+          f"average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
     for name, images in sets.items():
         dets = [extract_symbols(g) for g in images]
         glyphs = int(np.mean([len(d) for d in dets]))
