@@ -149,3 +149,15 @@ def test_pyramid_regions_cover_the_interior():
     base_steps, regions = pyramid._regions(filler, 3)
     assert len(base_steps) + sum(map(len, regions)) == len(filler.steps)
     assert len(regions) == 3  # interior rows 3..11 in bands of 3
+
+
+def test_tidy_keeps_validity_and_puts_the_constant_row_on_circles():
+    c = Constraints(3, (3, 3), 3)
+    plain = generate("linear", c, 30, 28, seed=0, time_limit=30).array
+    tidy = generate("linear", c, 30, 28, seed=0, time_limit=30, tidy=True).array
+    assert verify_array(tidy, c).valid
+    constant = [row[0] for row in tidy if (row == row[0]).all()]
+    assert constant == [1]
+    assert linear.quality_penalty(tidy) <= linear.quality_penalty(plain)
+    with pytest.raises(ValueError, match="tidy"):
+        generate("dfs", c, 10, 10, tidy=True)

@@ -65,7 +65,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     rows, cols = args.size
     try:
         result = generate(args.algorithm, constraints, rows, cols, seed=args.seed,
-                          time_limit=args.time_limit, progress=not args.quiet)
+                          time_limit=args.time_limit, progress=not args.quiet, tidy=args.tidy)
     except GenerationFailed as exc:
         print(f"error: {args.algorithm} found no {rows}x{cols} pattern for "
               f"{constraints.describe()}: {exc.reason}", file=sys.stderr)
@@ -192,6 +192,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     gen.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     gen.add_argument("--time-limit", type=float, default=60.0, metavar="SECONDS",
                      help="time budget (default 60)")
+    gen.add_argument("--tidy", action="store_true",
+                     help="auto/linear only: among offsets of the fold found, keep the one with "
+                          "the fewest constant or repeated lines and draw a constant line with "
+                          "value 1 (circles); still verified")
     gen.add_argument("--pitch-m", type=float, default=DEFAULT_PITCH_M,
                      help=f"symbol pitch in metres written to the file (default {DEFAULT_PITCH_M})")
     gen.add_argument("-o", "--output", required=True, metavar="FILE.yaml")

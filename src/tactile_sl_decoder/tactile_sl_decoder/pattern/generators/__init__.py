@@ -17,7 +17,8 @@ AUTO = "auto"
 
 
 def generate_auto(constraints: Constraints, rows: int, cols: int, seed: int = 0,
-                  time_limit: float | None = 60.0, progress: bool = False) -> GenerationResult:
+                  time_limit: float | None = 60.0, progress: bool = False,
+                  tidy: bool = False) -> GenerationResult:
     """Our best: the algebraic construction when GF(k) exists, else backtracking search.
 
     The linear construction is tried first with up to a quarter of the budget (it either
@@ -28,7 +29,7 @@ def generate_auto(constraints: Constraints, rows: int, cols: int, seed: int = 0,
     if linear.prime_power(constraints.symbols) is not None:
         share = None if time_limit is None else max(time_limit * 0.25, min(time_limit, 2.0))
         try:
-            result = linear.generate(constraints, rows, cols, seed, share, progress)
+            result = linear.generate(constraints, rows, cols, seed, share, progress, tidy)
             result.stats["via"] = linear.NAME
             result.algorithm = AUTO
             return result
@@ -67,9 +68,14 @@ DESCRIPTIONS: dict[str, str] = {
 __all__ = ["DESCRIPTIONS", "GENERATORS", "GenerationFailed", "GenerationResult", "generate"]
 
 
+TIDY_ALGORITHMS = (AUTO, linear.NAME)
+"""Generators that accept ``tidy`` (see :func:`linear.generate`)."""
+
+
 def generate(name: str, constraints: Constraints, rows: int, cols: int, seed: int = 0,
-             time_limit: float | None = 60.0, progress: bool = False) -> GenerationResult:
-    """Run the named generator."""
+             time_limit: float | None = 60.0, progress: bool = False,
+             tidy: bool = False) -> GenerationResult:
+    """Run the named generator (``tidy`` only for those in :data:`TIDY_ALGORITHMS`)."""
     try:
         func = GENERATORS[name]
     except KeyError:
@@ -84,4 +90,10 @@ def generate(name: str, constraints: Constraints, rows: int, cols: int, seed: in
             f"impossible: a {rows}x{cols} array has {windows} windows but no code with "
             f"{constraints.describe()} has more than {upper} words "
             "(see `tactile-sl pattern bound`)")
-    return func(constraints, rows, cols, seed=seed, time_limit=time_limit, progress=progress)
+    options = {}
+    if tidy:
+        if name not in TIDY_ALGORITHMS:
+            raise ValueError(f"tidy applies to {' and '.join(TIDY_ALGORITHMS)}, not {name}")
+        options["tidy"] = True
+    return func(constraints, rows, cols, seed=seed, time_limit=time_limit, progress=progress,
+                **options)

@@ -268,8 +268,14 @@ def _best_offset(seq: np.ndarray, rows: int, cols: int, stride: int, transpose: 
 
 
 def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
-             time_limit: float | None = 60.0, progress: bool = False) -> GenerationResult:
-    """Find a verified folded m-sequence array of the requested size."""
+             time_limit: float | None = 60.0, progress: bool = False,
+             tidy: bool = False) -> GenerationResult:
+    """Find a verified folded m-sequence array of the requested size.
+
+    ``tidy`` also picks, among offsets of the found fold, the one with the fewest regular
+    lines and puts a constant line (if any) on value 1; off by default so that the
+    shipped pattern's recipe (seed 0) keeps reproducing it.
+    """
     check_size(constraints, rows, cols)
     p = constraints.symbols
     if prime_power(p) is None:
@@ -327,9 +333,11 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
             budget.report(f"degree {degree}: tried {tried} folds")
             cert = verify_array(array, constraints)
             if cert.valid:
-                offset, array, cert = _best_offset(seq, rows, cols, stride, transpose,
-                                                   constraints, offset, array, cert, rng)
-                array, relabel = _relabel_constant_lines(array)
+                relabel = list(range(p))
+                if tidy:
+                    offset, array, cert = _best_offset(seq, rows, cols, stride, transpose,
+                                                       constraints, offset, array, cert, rng)
+                    array, relabel = _relabel_constant_lines(array)
                 budget.done()
                 return GenerationResult(array, NAME, seed, budget.elapsed(), {
                     "field": f"GF({p}^{degree})",
@@ -337,7 +345,7 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
                     "polynomial_order": "lowest degree first, monic",
                     "fold_stride": stride, "fold_transposed": bool(transpose),
                     "offset": offset, "folds_tried": tried,
-                    "symbol_relabel": relabel,
+                    "tidy": tidy, "symbol_relabel": relabel,
                     "min_distance": cert.min_distance})
             if budget.expired_now():
                 budget.done()
