@@ -493,6 +493,7 @@ class SyncEvent:
 
     pairs: list[tuple[int, Any, Any]] = field(default_factory=list)   # (stamp_ns, left, right)
     dropped: list[tuple[str, int, str]] = field(default_factory=list)  # (side, stamp, reason)
+    reset: bool = False            # time jumped back by more than max_age: state cleared
 
 
 class StereoSync:
@@ -500,7 +501,9 @@ class StereoSync:
 
     Unpaired messages wait in bounded per-side queues; a message older than the newest
     paired frame, or pushed out of a full queue, or older than ``max_age_ns`` behind the
-    newest message seen, is dropped (stale frames are never queued without bound).
+    newest message seen, is dropped (stale frames are never queued without bound).  A stamp
+    more than ``max_age_ns`` *before* the last paired frame means time jumped back (a bag
+    played again): the state is reset rather than every later frame dropped as stale.
     """
 
     def __init__(self, slop_ns: int = 0, queue_size: int = 5, max_age_ns: int = 500_000_000):
@@ -515,6 +518,16 @@ class StereoSync:
         """Offer one message; returns the pairs completed and the messages dropped."""
         ev = SyncEvent()
         other = "right" if side == "left" else "left"
+        if self.last_paired_ns is not None and stamp_ns < self.last_paired_ns - self.max_age_ns:
+            # Time jumped back by more than max_age (a bag played again, a looping replay,
+            # a restarted camera clock): start over instead of dropping everything.
+            for s in ("left", "right"):
+                for old in self.pending[s]:
+                    ev.dropped.append((s, old, "time jumped back (sync reset)"))
+                self.pending[s].clear()
+            self.last_paired_ns = None
+            self.newest_ns = None
+            ev.reset = True
         if self.last_paired_ns is not None and stamp_ns <= self.last_paired_ns:
             ev.dropped.append((side, stamp_ns, "stale (not newer than the last frame)"))
             return ev

@@ -202,6 +202,14 @@ def test_stereo_sync_pairs_exact_then_slop_and_bounds_queues():
     s3 = StereoSync(slop_ns=0)
     s3.add("right", 1_000_001_000, "R")
     assert s3.add("left", 1_000_000_000, "L").pairs == []
+    # time jumps back (a bag played again): start over, do not drop everything as stale
+    s4 = StereoSync(max_age_ns=500_000_000)
+    s4.add("left", 10 * 10**9, "L")
+    assert s4.add("right", 10 * 10**9, "R").pairs
+    assert s4.add("left", 10 * 10**9 - 100, "x").dropped[0][2].startswith("stale")
+    ev = s4.add("left", 10**9, "L0")
+    assert ev.reset and not ev.pairs
+    assert s4.add("right", 10**9, "R0").pairs == [(10**9, "L0", "R0")]
 
 
 def test_symbol_array_messages_convert_and_are_checked():

@@ -203,6 +203,9 @@ class DecoderNode(Node):
     def _on_frame(self, side: str, msg: Any) -> None:
         self.stats[side] += 1
         ev = self.sync.add(side, stamp_ns(msg.header), msg)
+        if ev.reset:
+            self.warn("time-jump", "input stamps jumped back in time (bag replayed or looped?): "
+                      "stereo pairing restarted")
         for s, stamp, reason in ev.dropped:
             self.stats["dropped"] += 1
             self.warn(f"drop-{reason}", f"dropped {s} frame {stamp / 1e9:.6f}: {reason}")
