@@ -3,13 +3,14 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := source env.sh &&
 
-.PHONY: help setup build test lint unit demo bags artwork clean
+.PHONY: help setup build test lint unit demo bags bench clean
 
 help:
 	@echo "make demo   - replay the bundled bag through the pipeline and print what came out"
 	@echo "make test   - lint + the whole test suite (creates .venv and builds on first use)"
 	@echo "make setup  - create .venv and colcon build (idempotent)"
 	@echo "make bags   - regenerate bags/ from the shipped pattern (deterministic)"
+	@echo "make bench  - speed and accuracy benchmarks (figures, not pass/fail)"
 	@echo "make clean  - remove build/, install/, log/ (keeps .venv)"
 
 setup:
@@ -32,6 +33,12 @@ demo: setup
 
 bags: setup
 	@$(ENV) bash tools/make_bags.sh
+
+bench: setup
+	@$(ENV) python tools/bench_extraction.py --bag bags/sphere_deep_small.mcap
+	@$(ENV) python tools/bench_pipeline.py
+	@$(ENV) python tools/bench_pipeline.py --flip 0.05
+	@$(ENV) python tools/bench_pipeline.py --ros --rate 30 --seconds 10
 
 clean:
 	rm -rf build install log

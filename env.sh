@@ -18,4 +18,6 @@ fi
 # DDS discovery must never leave this machine (contract): loopback only, own domain.
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-42}"
+# Fast DDS: 16 MB shared-memory segments (stereo images at 30 Hz) and UDP on loopback only.
+export FASTRTPS_DEFAULT_PROFILES_FILE="${FASTRTPS_DEFAULT_PROFILES_FILE:-$TACTILE_SL_ROOT/config/fastdds.xml}"
 case ":$PATH:" in *":$TACTILE_SL_ROOT/bin:"*) ;; *) export PATH="$TACTILE_SL_ROOT/bin:$PATH" ;; esac

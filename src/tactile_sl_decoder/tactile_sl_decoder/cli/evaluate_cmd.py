@@ -1,4 +1,4 @@
-"""`tactile-sl evaluate BAG.mcap ...`: extraction and classification figures vs ground truth.
+"""`tactile-sl evaluate BAG.mcap ...`: symbol and end-to-end figures against ground truth.
 
 The report is a list of sections, each a function of (args, bags) returning text; the
 symbol sections live here, later stages append theirs to ``SECTIONS``.
@@ -122,7 +122,15 @@ def _by_scene(rows: list[Any], totals: list[Any]) -> list[list[Any]]:
     return out
 
 
-SECTIONS: list[Callable[[argparse.Namespace, list[Path]], str]] = [symbol_sections]
+def e2e_sections(args: argparse.Namespace, bags: list[Path]) -> str:
+    """End-to-end figures: coverage, wrong cells, 3-D error against ground truth."""
+    from tactile_sl_decoder.e2e_metrics import e2e_section
+
+    return e2e_section(args, bags)
+
+
+SECTIONS: list[Callable[[argparse.Namespace, list[Path]], str]] = [symbol_sections,
+                                                                  e2e_sections]
 """Report sections, printed in order."""
 
 
