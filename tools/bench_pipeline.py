@@ -95,7 +95,7 @@ def in_process(args: argparse.Namespace) -> int:
 
     _set_threads(args.cpu_threads)
     pipe = _pipeline(args)
-    stages = ("check", "extract", "classify", "decode", "stereo", "total")
+    stages = ("check", "extract", "knn", "classify", "workers", "decode", "stereo", "total")
     timings: dict[str, list[float]] = {s: [] for s in stages}
     tables = []
     glyphs = []
@@ -261,8 +261,8 @@ def main() -> int:
     p.add_argument("bags", nargs="*", help="bags (default: bags/*.mcap)")
     p.add_argument("--pattern", default=None, help="pattern YAML (default: the shipped one)")
     p.add_argument("--mirrored", action="store_true")
-    p.add_argument("--threads", type=int, default=1,
-                   help="pipeline worker threads for the two images (default 1)")
+    p.add_argument("--threads", type=int, default=2,
+                   help="pipeline worker threads for the two images (default 2, as the node)")
     p.add_argument("--cpu-threads", type=int, default=1,
                    help="OpenCV / torch intra-op threads (0 = library defaults)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per frame")

@@ -33,6 +33,7 @@ from tactile_sl_decoder.grid import Grid, window_indices
 
 LABEL_UNKNOWN = 255
 CELL_UNKNOWN = -1
+DIRECT_TABLE_MAX = 1 << 22   # code spaces up to this size are looked up by direct address
 
 
 class PatternError(ValueError):
@@ -161,16 +162,33 @@ class Codebook:
         self.table_keys = uniq
         self.table_cells = out_cell
         self.table_costs = out_cost
+        # Small code spaces (3 symbols, 3x3: 4^9 = 262,144 codes) get a direct-address
+        # table: one gather per look-up instead of a binary search.
+        self.direct_cells: np.ndarray | None = None
+        if self.base ** self.n <= DIRECT_TABLE_MAX:
+            self.direct_cells = np.full(self.base ** self.n, -1, dtype=np.int64)
+            self.direct_cells[uniq] = out_cell
 
     def lookup(self, codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Anchor cell index (row * cols + col, -1 if none) and correction cost per code."""
         codes = np.asarray(codes, dtype=np.int64)
+        if self.direct_cells is not None:
+            cell = self.direct_cells[codes]
+            pos = np.searchsorted(self.table_keys, codes)
+            pos = np.minimum(pos, len(self.table_keys) - 1)
+            return cell, np.where(cell >= 0, self.table_costs[pos], np.inf)
         pos = np.searchsorted(self.table_keys, codes)
         pos = np.minimum(pos, len(self.table_keys) - 1)
         hit = self.table_keys[pos] == codes
         cell = np.where(hit, self.table_cells[pos], -1)
         cost = np.where(cell >= 0, self.table_costs[pos], np.inf)
         return cell, cost
+
+    def _cells(self, codes: np.ndarray) -> np.ndarray:
+        """Anchor cell per code (-1 if none): :meth:`lookup` without the costs."""
+        if self.direct_cells is not None:
+            return self.direct_cells[codes]
+        return self.lookup(codes)[0]
 
     def decode_windows(self, labels: np.ndarray, confidence: np.ndarray,
                        retry_confidence: float = 0.9) -> np.ndarray:
@@ -182,7 +200,7 @@ class Codebook:
         """
         labels = np.asarray(labels, dtype=np.int64)
         lab = np.where((labels < 0) | (labels >= self.symbols), self.symbols, labels)
-        cell, _ = self.lookup(lab @ self.weights)
+        cell = self._cells(lab @ self.weights)
         fail = np.flatnonzero(cell < 0)
         if len(fail):
             conf = np.where(lab[fail] == self.symbols, np.inf, confidence[fail])
@@ -192,8 +210,7 @@ class Codebook:
             if len(retry):
                 lab2 = lab[retry].copy()
                 lab2[np.arange(len(retry)), weakest[weak_conf < retry_confidence]] = self.symbols
-                cell2, _ = self.lookup(lab2 @ self.weights)
-                cell[retry] = cell2
+                cell[retry] = self._cells(lab2 @ self.weights)
         return cell
 
 
@@ -222,6 +239,9 @@ class _Layout:
         self.valid = np.zeros((self.groups, self.H, self.W), dtype=bool)
         self.valid[:, 1:-1, 1:-1] = True
         self.valid = self.valid.reshape(-1)
+        # valid, plus W + 2 False entries: the "implied cell" -1 - delta of an unknown
+        # neighbour (-W - 2 .. W) then indexes padding or that tail, never a valid cell.
+        self.valid_ext = np.concatenate([self.valid, np.zeros(self.W + 2, dtype=bool)])
 
     def encode(self, group: np.ndarray, row: np.ndarray, col: np.ndarray) -> np.ndarray:
         """Internal cell numbers."""
@@ -238,6 +258,12 @@ class _Layout:
         out = np.full((self.groups, self.H, self.W), -1, dtype=np.int64)
         out[:, 1:-1, 1:-1] = array[None]
         return out.reshape(-1)
+
+
+def _links(nbr: np.ndarray) -> np.ndarray:
+    """The 8 neighbours of every glyph, (N, 8), N where there is none (a sentinel slot)."""
+    j = nbr[:, _OTHERS]
+    return np.where(j >= 0, j, len(nbr))
 
 
 def _group_votes(glyph: np.ndarray, cell: np.ndarray, ncells: int
@@ -323,18 +349,19 @@ class CodewordDecoder:
         cell[gg[accept]] = cc[accept]
         votes_out[gg[accept]] = top[accept]
 
-        cell = self._consistency(pgrid.nbr, cell, lay)
-        cell = self._islands(pgrid, cell, lay)
+        links = _links(pgrid.nbr)
+        cell = self._consistency(pgrid.nbr, cell, lay, links)
+        cell = self._islands(pgrid, cell, lay, links)
         values = lay.values(cb.array)
         grew = False
         for _ in range(p.grow_iterations):
-            grown = self._grow(pgrid.nbr, cell, lab, lay, values)
+            grown = self._grow(pgrid.nbr, cell, lab, lay, values, links)
             if not np.any(grown != cell):
                 break
             grew = True
-            cell = self._consistency(pgrid.nbr, grown, lay)
+            cell = self._consistency(pgrid.nbr, grown, lay, links)
         if grew:
-            cell = self._islands(pgrid, cell, lay)
+            cell = self._islands(pgrid, cell, lay, links)
         has = cell >= 0
         _, r, c = lay.split(cell[has])
         row[has] = r.astype(np.int32)
@@ -342,24 +369,25 @@ class CodewordDecoder:
         return Decoded(row, col, votes_out, windows_decoded)
 
     @staticmethod
-    def _expected(nbr: np.ndarray, cell: np.ndarray, lay: _Layout
-                  ) -> tuple[np.ndarray, np.ndarray]:
+    def _expected(nbr: np.ndarray, cell: np.ndarray, lay: _Layout,
+                  links: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Per glyph and 8-neighbour: the neighbour's cell and the cell it implies here.
 
         Both (N, 8) internal cell numbers, -1 where unknown or outside the pattern.
+        ``links``: :func:`_links` of ``nbr``, if already computed.
         """
-        j = nbr[:, _OTHERS]
-        cj = np.where(j >= 0, cell[np.maximum(j, 0)], -1)
-        implied = cj - lay.delta[None, :]
-        known = cj >= 0
-        known &= lay.valid[np.where(known, implied, 0)]
-        return cj, np.where(known, implied, -1)
+        if links is None:
+            links = _links(nbr)
+        cj = np.append(cell, -1)[links]             # -1: no neighbour or undecided
+        implied = cj - lay.delta
+        return cj, np.where(lay.valid_ext[implied], implied, -1)
 
-    def _consistency(self, nbr: np.ndarray, cell: np.ndarray, lay: _Layout) -> np.ndarray:
+    def _consistency(self, nbr: np.ndarray, cell: np.ndarray, lay: _Layout,
+                     links: np.ndarray | None = None) -> np.ndarray:
         """Drop glyphs whose decided neighbours disagree with them, and duplicate cells."""
         cell = cell.copy()
         for _ in range(2):
-            cj, implied = self._expected(nbr, cell, lay)
+            cj, implied = self._expected(nbr, cell, lay, links)
             known = (cj >= 0) & (cell[:, None] >= 0)
             agree = (known & (implied == cell[:, None])).sum(axis=1)
             disagree = (known & (implied != cell[:, None])).sum(axis=1)
@@ -373,7 +401,8 @@ class CodewordDecoder:
         cell[has[claims[cell[has]] > 1]] = -1
         return cell
 
-    def _islands(self, grid: Grid, cell: np.ndarray, lay: _Layout) -> np.ndarray:
+    def _islands(self, grid: Grid, cell: np.ndarray, lay: _Layout,
+                 links: np.ndarray | None = None) -> np.ndarray:
         """Keep only sizeable, mutually consistent regions of decoded glyphs.
 
         Decoded glyphs linked by lattice neighbours holding the neighbouring cells form
@@ -390,12 +419,13 @@ class CodewordDecoder:
         dec = np.flatnonzero(cell >= 0)
         if len(dec) == 0:
             return cell
-        _, implied = self._expected(grid.nbr, cell, lay)
+        _, implied = self._expected(grid.nbr, cell, lay, links)
         ok = (implied == cell[:, None]) & (cell[:, None] >= 0)
-        # CSR straight from the neighbour table (8 slots per glyph; no link = self loop).
-        indices = np.where(ok, grid.nbr[:, _OTHERS], np.arange(n)[:, None]).reshape(-1)
-        graph = csr_matrix((np.ones(8 * n, dtype=np.int8), indices,
-                            np.arange(0, 8 * n + 1, 8)), shape=(n, n))
+        # CSR straight from the neighbour table (8 slots per glyph; no link = self loop);
+        # float64 weights and int32 indices are what csgraph works in (no conversion copies).
+        indices = np.where(ok, grid.nbr[:, _OTHERS], np.arange(n)[:, None]).astype(np.int32)
+        graph = csr_matrix((np.ones(8 * n), indices.reshape(-1),
+                            np.arange(0, 8 * n + 1, 8, dtype=np.int32)), shape=(n, n))
         _, comp = connected_components(graph, directed=False)
         sizes = np.bincount(comp[dec], minlength=comp.max() + 1)
         keep = sizes[comp] >= p.min_component
@@ -435,14 +465,14 @@ class CodewordDecoder:
         return out
 
     def _grow(self, nbr: np.ndarray, cell: np.ndarray, lab: np.ndarray, lay: _Layout,
-              values: np.ndarray) -> np.ndarray:
+              values: np.ndarray, links: np.ndarray | None = None) -> np.ndarray:
         """Give undecided glyphs the cell implied by agreeing decided neighbours.
 
         All decided neighbours must agree, the cell must be free, and more of them are needed
         when the glyph's label is unknown or contradicts the pattern there.
         """
         p, cb = self.params, self.codebook
-        _, implied = self._expected(nbr, cell, lay)
+        _, implied = self._expected(nbr, cell, lay, links)
         undecided = cell < 0
         imp = np.where(undecided[:, None], implied, -1)
         srt = np.sort(imp, axis=1)

@@ -73,36 +73,40 @@ def _empty(n: int, pts: np.ndarray | None = None) -> Grid:
                 np.zeros((n, 2)) if pts is None else pts)
 
 
-def _global_frame(disp: np.ndarray, dist: np.ndarray, spacing: float) -> np.ndarray:
+def _global_frame(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, spacing: float
+                  ) -> np.ndarray:
     """Unit column direction (closest lattice axis to +u) from short displacements."""
     short = (dist > 0.5 * spacing) & (dist < 1.25 * spacing)
-    d = disp[short]
-    if len(d) == 0:
+    if not short.any():
         return np.array([1.0, 0.0])
-    theta = np.arctan2(d[:, 1], d[:, 0])
+    theta = np.arctan2(dv[short], du[short])
     phi = np.angle(np.exp(4j * theta).sum()) / 4.0   # in (-45, 45] degrees: closest to +u
     return np.array([np.cos(phi), np.sin(phi)])
 
 
-def _best_four(disp: np.ndarray, dist: np.ndarray, valid: np.ndarray, col_dir: np.ndarray,
-               row_dir: np.ndarray, spacing: float, p: GridParams
+def _best_four(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.ndarray,
+               col_dir: np.ndarray, row_dir: np.ndarray, spacing: float, p: GridParams
                ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per glyph, the shortest neighbour step within angle/length gates of +-col, +-row.
 
     Four (displacement (N, 2) NaN where none, k-NN column (N,) -1 where none) pairs.
     """
     inv = 1.0 / np.maximum(dist, 1e-12)
-    cos_c = (disp[..., 0] * col_dir[0] + disp[..., 1] * col_dir[1]) * inv
-    cos_r = (disp[..., 0] * row_dir[0] + disp[..., 1] * row_dir[1]) * inv
+    cos_c = (du * col_dir[0] + dv * col_dir[1]) * inv
+    cos_r = (du * row_dir[0] + dv * row_dir[1]) * inv
     gate = valid & (dist > p.init_min_len * spacing) & (dist < p.init_max_len * spacing)
     t = np.cos(np.radians(p.init_angle_deg))
-    rows = np.arange(disp.shape[0])
+    kk = dist.shape[1]
+    base = np.arange(dist.shape[0]) * kk
+    gated = np.where(gate, dist, np.inf)
+    flat_u, flat_v = du.reshape(-1), dv.reshape(-1)
     out = []
     for ok in (cos_c > t, cos_c < -t, cos_r > t, cos_r < -t):
-        score = np.where(ok & gate, dist, np.inf)
+        score = np.where(ok, gated, np.inf)
         k = np.argmin(score, axis=1)
-        none = ~np.isfinite(score[rows, k])
-        step = disp[rows, k]
+        at = base + k
+        none = score.reshape(-1)[at] == np.inf
+        step = np.column_stack([flat_u[at], flat_v[at]])
         step[none] = np.nan
         out.append((step, np.where(none, -1, k)))
     return out
@@ -110,119 +114,221 @@ def _best_four(disp: np.ndarray, dist: np.ndarray, valid: np.ndarray, col_dir: n
 
 def _combine(forward: np.ndarray, backward: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     """Mean of the forward step and the negated backward step, whichever exist."""
-    stack = np.stack([forward, -backward])
-    have = np.isfinite(stack[..., 0])
-    total = np.where(have[..., None], stack, 0.0).sum(axis=0)
-    count = have.sum(axis=0)
-    out = np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], np.nan)
-    missing = ~np.isfinite(out[:, 0])
-    out[missing] = fallback[missing] if fallback.ndim == 2 else fallback
-    return out
+    fwd = np.isfinite(forward[:, :1])
+    bwd = np.isfinite(backward[:, :1])
+    total = np.where(fwd, forward, 0.0) + np.where(bwd, -backward, 0.0)
+    count = fwd.astype(np.float64) + bwd
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = total / count
+    return np.where(count > 0, out, fallback)
+
+
+_SORT5 = ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2))
+"""An optimal sorting network for 5 values (9 compare-exchanges)."""
 
 
 def _smooth(vec: np.ndarray, nbr4: np.ndarray) -> np.ndarray:
     """Median of per-glyph vectors (N, D) and their found 4-neighbours' (robust to one bad one)."""
-    stack = np.concatenate([vec[:, None, :], np.where((nbr4 >= 0)[..., None],
-                                                      vec[np.maximum(nbr4, 0)], np.nan)], axis=1)
-    srt = np.sort(stack, axis=1)                       # NaNs sort last
-    cnt = np.isfinite(stack[..., 0]).sum(axis=1)       # (N,)
-    rows = np.arange(len(vec))
-    lo = srt[rows, np.maximum((cnt - 1) // 2, 0)]
-    hi = srt[rows, np.maximum(cnt // 2, 0)]
-    out = 0.5 * (lo + hi)
-    return np.where((cnt > 0)[:, None], out, vec)
+    n, dim = vec.shape
+    ext = np.vstack([vec, np.full((1, dim), np.inf)])  # a missing neighbour (-1) reads +inf
+    m = [vec] + [ext[nbr4[:, k]] for k in range(4)]    # 5 x (N, D), sorted below
+    for a, b in _SORT5:
+        lo = np.minimum(m[a], m[b])
+        m[b] = np.maximum(m[a], m[b])
+        m[a] = lo
+    cnt = (1 + (nbr4 >= 0).sum(axis=1))[:, None]       # members: the glyph itself and found ones
+    lo = np.where(cnt >= 5, m[2], np.where(cnt >= 3, m[1], m[0]))   # index (cnt - 1) // 2
+    hi = np.where(cnt >= 4, m[2], np.where(cnt >= 2, m[1], m[0]))   # index cnt // 2
+    return 0.5 * (lo + hi)
+
+
+def nearest_neighbours(u: np.ndarray, v: np.ndarray, k: int, spacing_hint: float = 0.0
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The ``k - 1`` nearest other glyphs of every glyph: distances (N, k-1), indices.
+
+    Candidates farther than 3 spacings (when ``spacing_hint`` > 0) or beyond the point
+    count are ``inf`` (their index is meaningless).  Step 1 of :func:`build_grid`, exposed
+    so that it can run per image in a worker thread (the k-d tree releases the GIL) and be
+    passed to :func:`build_grid` as ``neighbours``.
+    """
+    pts = np.column_stack([np.asarray(u, np.float64).reshape(-1),
+                           np.asarray(v, np.float64).reshape(-1)])
+    if len(pts) == 0:
+        return np.zeros((0, max(k - 1, 0))), np.zeros((0, max(k - 1, 0)), dtype=np.intp)
+    tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)   # faster to build
+    bound = 3.0 * spacing_hint if spacing_hint > 0 else np.inf   # only prunes the search
+    dist, idx = tree.query(pts, k=max(k, 2), distance_upper_bound=bound)
+    return dist[:, 1:k], idx[:, 1:k]                  # drop self
 
 
 def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
-               spacing_hint: float = 0.0) -> Grid:
-    """Recover the 8-neighbourhood of every glyph centre (u, v) on the deformed lattice."""
+               spacing_hint: float = 0.0,
+               neighbours: tuple[np.ndarray, np.ndarray] | None = None) -> Grid:
+    """Recover the 8-neighbourhood of every glyph centre (u, v) on the deformed lattice.
+
+    ``neighbours``: the (distances, indices) of :func:`nearest_neighbours` with
+    ``k = params.k_neighbours``, if already computed (e.g. per image and offset).
+    """
     p = params or GridParams()
-    pts = np.column_stack([np.asarray(u, np.float64), np.asarray(v, np.float64)])
+    u = np.asarray(u, np.float64).reshape(-1)
+    v = np.asarray(v, np.float64).reshape(-1)
+    pts = np.column_stack([u, v])
     n = len(pts)
     if n < 3:
         return _empty(n, pts)
-    k = min(p.k_neighbours, n)
-    tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)   # faster to build
-    bound = 3.0 * spacing_hint if spacing_hint > 0 else np.inf   # only prunes the search
-    dist, idx = tree.query(pts, k=k, distance_upper_bound=bound)
-    idx = np.where(np.isfinite(dist), idx, 0)          # missing -> masked by `valid`
-    dist, idx = dist[:, 1:], idx[:, 1:]               # drop self
-    disp = pts[idx] - pts[:, None, :]
+    if neighbours is None:
+        neighbours = nearest_neighbours(u, v, min(p.k_neighbours, n), spacing_hint)
+    dist, idx = neighbours
     valid = np.isfinite(dist)
+    idx = np.where(valid, idx, 0)                     # missing -> masked by `valid`
+    du = u[idx] - u[:, None]                          # (N, K) displacements, contiguous
+    dv = v[idx] - v[:, None]
     nn = dist[:, 0]
-    spacing = float(np.median(nn[np.isfinite(nn)])) if np.isfinite(nn).any() else 0.0
+    spacing = float(np.median(nn[valid[:, 0]])) if valid[:, 0].any() else 0.0
     if not np.isfinite(spacing) or spacing <= 0:
         return _empty(n, pts)
     step = max(1, n // 400)                           # a few hundred glyphs are plenty
-    col_dir = _global_frame(disp[::step, :4].reshape(-1, 2), dist[::step, :4].reshape(-1),
-                            spacing)
+    col_dir = _global_frame(du[::step, :4], dv[::step, :4], dist[::step, :4], spacing)
     row_dir = np.array([-col_dir[1], col_dir[0]])     # +v side of the column direction
 
     # Local lattice vectors, following stretching: the best-aligned neighbour each way.
-    steps = _best_four(disp, dist, valid, col_dir, row_dir, spacing, p)
+    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, spacing, p)
     col_vec = _combine(steps[0][0], steps[1][0], col_dir * spacing)
     row_vec = _combine(steps[2][0], steps[3][0], row_dir * spacing)
-    rows = np.arange(n)
-    nbr4 = np.stack([np.where(k >= 0, idx[rows, np.maximum(k, 0)], -1) for _, k in steps],
-                    axis=1)
+    kcol = np.stack([kk for _, kk in steps], axis=1)                  # (N, 4)
+    nbr4 = np.where(kcol >= 0, np.take_along_axis(idx, np.maximum(kcol, 0), axis=1), -1)
     # Smooth them over the 4-neighbourhood (a median: one wrong link does not matter).
     for _ in range(p.smooth_iterations):
         both = _smooth(np.concatenate([col_vec, row_vec], axis=1), nbr4)
         col_vec, row_vec = both[:, :2], both[:, 2:]
-    nbr = _assign(pts, disp, idx, valid, col_vec, row_vec, p)
+    nbr = _assign(du, dv, idx, valid, col_vec, row_vec, p)
     return Grid(nbr, col_vec, row_vec, spacing, pts)
 
 
-def _assign(pts: np.ndarray, disp: np.ndarray, idx: np.ndarray, valid: np.ndarray,
+_OTHERS = np.array([o for o in range(9) if o != CENTRE])
+_REVERSE = 8 - _OTHERS                            # the opposite neighbour's column
+_DIAG = np.array([0, 2, 6, 8])                    # (dr, dc) = (-1, -1), (-1, 1), (1, -1), (1, 1)
+_DIAG_VIA_ROW = 3 * (OFFSETS[_DIAG, 0] + 1) + 1   # column of (dr, 0)
+_DIAG_VIA_COL = 3 + OFFSETS[_DIAG, 1] + 1         # column of (0, dc)
+_DIAG_THEN_COL = _DIAG_VIA_COL
+_DIAG_THEN_ROW = _DIAG_VIA_ROW
+_ODC = OFFSETS[_OTHERS, 1].astype(np.float64)     # (8,) column step of each neighbour
+_ODR = OFFSETS[_OTHERS, 0].astype(np.float64)     # (8,) row step
+
+
+def _assign(du: np.ndarray, dv: np.ndarray, idx: np.ndarray, valid: np.ndarray,
             col_vec: np.ndarray, row_vec: np.ndarray, p: GridParams) -> np.ndarray:
-    """Neighbour table from local vectors, with mutual and diagonal consistency checks."""
-    n = len(pts)
+    """Neighbour table from local vectors, with mutual and diagonal consistency checks.
+
+    Neighbour (dr, dc) of glyph i is the candidate closest to the predicted displacement
+    ``dc * col_vec + dr * row_vec``, if within ``match_tol`` local spacings.  Fast path: each
+    candidate's lattice coordinates, rounded, name the only prediction it can be within
+    tolerance of (exact while the local vectors are at least ~45 degrees apart, see
+    :func:`_match_fast`); glyphs where that does not hold, or where two candidates match the
+    same prediction, take the exhaustive (N, 8, K) comparison.  Same result either way.
+    """
+    n, kk = idx.shape
     rows = np.arange(n)
-    local = np.minimum(np.linalg.norm(col_vec, axis=1), np.linalg.norm(row_vec, axis=1))
+    local = np.minimum(np.hypot(col_vec[:, 0], col_vec[:, 1]),
+                       np.hypot(row_vec[:, 0], row_vec[:, 1]))
     tol2 = (p.match_tol * local) ** 2
-    others = np.array([o for o in range(9) if o != CENTRE])
-    # Predicted displacement of every off-centre neighbour, (N, 8, 2); all at once.
-    pred = (OFFSETS[others, 1][None, :, None] * col_vec[:, None, :]
-            + OFFSETS[others, 0][None, :, None] * row_vec[:, None, :]).astype(np.float32)
-    d32 = disp.astype(np.float32)
-    d32[~valid] = 1e6                       # missing candidates: never within tolerance
-    # Squared distances |disp - pred|^2, (N, 8, K), float32 elementwise (pixels: plenty).
-    du = d32[:, None, :, 0] - pred[:, :, None, 0]
-    dv = d32[:, None, :, 1] - pred[:, :, None, 1]
-    err = du * du
-    err += dv * dv
-    k = np.argmin(err, axis=2)                                          # (N, 8)
+    # Predicted displacement of every off-centre neighbour, (N, 8) per axis.
+    pred_u = (_ODC * col_vec[:, :1] + _ODR * row_vec[:, :1]).astype(np.float32)
+    pred_v = (_ODC * col_vec[:, 1:] + _ODR * row_vec[:, 1:]).astype(np.float32)
+    du32 = du.astype(np.float32)
+    dv32 = dv.astype(np.float32)
+    links, slow = _match_fast(du, dv, du32, dv32, valid, col_vec, row_vec, pred_u, pred_v,
+                              tol2, p.match_tol)
+    if len(slow):
+        miss = ~valid[slow]                       # missing: never within tolerance
+        links[slow] = _match_exhaustive(np.where(miss, np.float32(1e6), du32[slow]),
+                                        np.where(miss, np.float32(1e6), dv32[slow]),
+                                        pred_u[slow], pred_v[slow], tol2[slow])
+    found = idx.reshape(-1)[np.maximum(links, 0) + (rows * kk)[:, None]]
+    # Neighbour table with a sentinel row n (all -1): a missing link (-1) indexes it.
+    nbr = np.full((n + 1, 9), -1, dtype=np.int64)
+    nbr[:n, CENTRE] = rows
+    nbr[:n, _OTHERS] = np.where(links >= 0, found, -1)
+    _mutual(nbr)
+    # Diagonals must agree with both two-step paths that exist (the four diagonals read
+    # only the 4-neighbour columns, which this step does not change: all at once).
+    d = nbr[:n, _DIAG]
+    path1 = nbr[nbr[:n, _DIAG_VIA_ROW], _DIAG_THEN_COL]     # (dr, 0) then (0, dc)
+    path2 = nbr[nbr[:n, _DIAG_VIA_COL], _DIAG_THEN_ROW]     # (0, dc) then (dr, 0)
+    bad = ((path1 >= 0) & (path1 != d)) | ((path2 >= 0) & (path2 != d))
+    nbr[:n, _DIAG] = np.where(bad, -1, d)
+    _mutual(nbr)
+    return nbr[:n]
+
+
+def _match_exhaustive(du32: np.ndarray, dv32: np.ndarray, pred_u: np.ndarray,
+                      pred_v: np.ndarray, tol2: np.ndarray) -> np.ndarray:
+    """k-NN column (M, 8) of the candidate nearest each prediction, -1 beyond tolerance."""
+    # Squared distances |disp - pred|^2, (M, 8, K), float32 elementwise (pixels: plenty).
+    err = np.subtract(du32[:, None, :], pred_u[:, :, None])
+    err *= err
+    tmp = np.subtract(dv32[:, None, :], pred_v[:, :, None])
+    tmp *= tmp
+    err += tmp
+    k = np.argmin(err, axis=2)                                          # (M, 8)
     best = np.take_along_axis(err, k[..., None], axis=2)[..., 0]
-    found = np.take_along_axis(idx, k, axis=1)
-    nbr = np.full((n, 9), -1, dtype=np.int64)
-    nbr[:, CENTRE] = rows
-    nbr[:, others] = np.where(best < tol2[:, None], found, -1)
-    _mutual(nbr)
-    # Diagonals must agree with both two-step paths that exist.
-    for o, (dr, dc) in enumerate(OFFSETS):
-        if dr == 0 or dc == 0:
-            continue
-        d = nbr[:, o]
-        via_row = nbr[:, 3 * (dr + 1) + 1]        # (dr, 0)
-        via_col = nbr[:, 3 + (dc + 1)]            # (0, dc)
-        path1 = np.where(via_row >= 0, nbr[np.maximum(via_row, 0), 3 + (dc + 1)], -1)
-        path2 = np.where(via_col >= 0, nbr[np.maximum(via_col, 0), 3 * (dr + 1) + 1], -1)
-        bad = ((path1 >= 0) & (path1 != d)) | ((path2 >= 0) & (path2 != d))
-        nbr[(d >= 0) & bad, o] = -1
-    _mutual(nbr)
-    return nbr
+    return np.where(best < tol2[:, None], k, -1)
+
+
+def _match_fast(du: np.ndarray, dv: np.ndarray, du32: np.ndarray, dv32: np.ndarray,
+                valid: np.ndarray, col_vec: np.ndarray, row_vec: np.ndarray,
+                pred_u: np.ndarray, pred_v: np.ndarray, tol2: np.ndarray, match_tol: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate matching through lattice coordinates; (links (N, 8), glyphs to redo).
+
+    A candidate within ``tol = match_tol * min(|c|, |r|)`` of the prediction ``(a, b)`` (in
+    steps of c = col_vec, r = row_vec) has lattice coordinates within ``tol / (min(|c|, |r|)
+    sin(angle(c, r)))`` of ``(a, b)`` per axis, i.e. below 0.5 when ``sin > 2 * match_tol``
+    (with margin): rounding its coordinates then names that prediction, and only it.  The
+    squared distance is computed exactly as in :func:`_match_exhaustive` (float32), so where
+    each prediction has at most one candidate within tolerance the links are identical.
+    """
+    n, kk = du.shape
+    c0, c1 = col_vec[:, 0:1], col_vec[:, 1:2]
+    r0, r1 = row_vec[:, 0:1], row_vec[:, 1:2]
+    det = c0 * r1 - c1 * r0                                       # (N, 1)
+    norm = np.hypot(c0, c1) * np.hypot(r0, r1)
+    good = np.abs(det[:, 0]) > (2.0 * match_tol + 0.05) * norm[:, 0]
+    inv = np.where(good[:, None], 1.0 / np.where(good[:, None], det, 1.0), 0.0)
+    a = np.rint((du * r1 - dv * r0) * inv)                        # column steps
+    b = np.rint((dv * c0 - du * c1) * inv)                        # row steps
+    code = 3.0 * b + a + 4.0                                      # 3 * (dr + 1) + (dc + 1)
+    ok = valid & (np.abs(a) <= 1) & (np.abs(b) <= 1) & (code != CENTRE)
+    slot = np.where(ok, code - (code > CENTRE), 0).astype(np.intp)   # 0..7 (_OTHERS order)
+    flat = slot + (np.arange(n) * 8)[:, None]
+    eu = du32 - pred_u.reshape(-1)[flat]
+    eu *= eu
+    ev = dv32 - pred_v.reshape(-1)[flat]
+    ev *= ev
+    eu += ev
+    ok &= eu < tol2[:, None]
+    hit_flat = flat[ok]
+    links = np.full(n * 8, -1, dtype=np.intp)
+    links[hit_flat] = np.nonzero(ok)[1]
+    # Two candidates within tolerance of one prediction: take the exhaustive path there.
+    clash = np.bincount(hit_flat, minlength=n * 8) > 1
+    redo = ~good
+    if clash.any():
+        redo |= clash.reshape(n, 8).any(axis=1)
+    return links.reshape(n, 8), np.flatnonzero(redo)
 
 
 def _mutual(nbr: np.ndarray) -> None:
-    """Keep only mutual links: j = nbr[i, o] requires nbr[j, 8 - o] == i (in place)."""
-    rows = np.arange(len(nbr))
-    for o in range(9):
-        if o == CENTRE:
-            continue
-        j = nbr[:, o]
-        has = j >= 0
-        back = np.where(has, nbr[np.maximum(j, 0), 8 - o], -1)
-        nbr[has & (back != rows), o] = -1
+    """Keep only mutual links: j = nbr[i, o] requires nbr[j, 8 - o] == i (in place).
+
+    ``nbr`` has a sentinel last row of -1 (indexed by missing links).  All offsets at once:
+    the same as one offset after the other, since a link and its reverse are judged alike.
+    """
+    n = len(nbr) - 1
+    j = nbr[:n, _OTHERS]
+    back = nbr[j, _REVERSE]                       # j = -1 reads the sentinel row
+    keep = back == np.arange(n)[:, None]
+    nbr[:n, _OTHERS] = np.where(keep, j, -1)
 
 
 def window_indices(grid: Grid, window: tuple[int, int]) -> np.ndarray:

@@ -22,14 +22,14 @@ import numpy as np
 from tactile_sl_camera.camera_info import CameraInfoError
 from tactile_sl_camera.clouds import POINT_DTYPE, pack_points
 from tactile_sl_decoder.codewords import Codebook, CodewordDecoder, DecodeParams
-from tactile_sl_decoder.grid import GridParams, build_grid
+from tactile_sl_decoder.grid import GridParams, build_grid, nearest_neighbours
 from tactile_sl_decoder.stereo import StereoParams, StereoRig, match_and_triangulate
 
 LABEL_UNKNOWN = 255
 
 
 def set_cpu_threads(n: int, torch_too: bool = True) -> None:
-    """Intra-op threads of OpenCV and torch for this process (0 = leave the defaults).
+    """Intra-op threads of OpenCV, OpenBLAS and torch for this process (0 = leave them).
 
     Per frame the work is small (a few ms): with several threads per library on a small,
     shared machine the threads wait on each other (torch inference measured 500 ms instead of
@@ -41,6 +41,7 @@ def set_cpu_threads(n: int, torch_too: bool = True) -> None:
 
     if cv2.getNumThreads() != n:
         cv2.setNumThreads(n)
+    _set_blas_threads(n)
     if not torch_too:
         return
     try:
@@ -50,6 +51,56 @@ def set_cpu_threads(n: int, torch_too: bool = True) -> None:
             torch.set_num_threads(n)
     except ImportError:
         pass
+
+
+_BLAS_THREADS: list[int] = []      # the thread count last given to the loaded OpenBLAS copies
+
+
+def _set_blas_threads(n: int) -> None:
+    """Threads of every OpenBLAS copy loaded in this process (numpy's, scipy's, OpenCV's).
+
+    numpy's matrix products (the classifier) otherwise start one BLAS thread per core: with
+    the two images classified in two workers on two cores, those threads spin against each
+    other (measured: extraction + classification 12 ms instead of 9 ms per stereo pair).
+    Done once per count; libraries that are not loaded are left alone.
+    """
+    if _BLAS_THREADS == [n]:
+        return
+    import ctypes
+
+    try:
+        with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
+            paths = {line.split()[-1] for line in fh if "openblas" in line.lower()}
+        libs = {p for p in paths
+                if p.startswith("/") and "openblas" in p.rsplit("/", 1)[-1].lower()}
+    except OSError:
+        libs = set()
+    for path in sorted(libs):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for name in ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
+                     "openblas_set_num_threads64_", "openblas_set_num_threads"):
+            fn = getattr(lib, name, None)
+            if fn is not None:
+                fn(ctypes.c_int(n))
+                break
+    _BLAS_THREADS[:] = [n]
+
+
+def _shorten_switch_interval(ms: float) -> None:
+    """Lower Python's GIL switch interval (process-wide) to at most ``ms`` milliseconds.
+
+    A worker returning from a GIL-free call (OpenCV, the k-d tree, a matrix product) waits
+    for the GIL until the other worker, busy with small numpy operations, is forced to hand
+    it over: by default after 5 ms.  With the two images in two workers that wait dominated
+    (stereo pair 21 ms at 5 ms, 16 ms at 1 ms; 0.2 ms gains nothing more).
+    """
+    import sys
+
+    if ms > 0 and sys.getswitchinterval() > 1e-3 * ms:
+        sys.setswitchinterval(1e-3 * ms)
 
 
 class PipelineInputError(ValueError):
@@ -75,6 +126,9 @@ class Glyphs:
     patches: np.ndarray | None = None     # (N, P, P) uint8
     row: np.ndarray | None = None
     col: np.ndarray | None = None
+    neighbours: tuple[np.ndarray, np.ndarray] | None = None
+    """k-NN table of (u, v) (:func:`~tactile_sl_decoder.grid.nearest_neighbours`), if the
+    pipeline computed it already (in a worker thread); else decoding computes it."""
 
     def __post_init__(self) -> None:
         self.u = np.asarray(self.u, dtype=np.float32).reshape(-1)
@@ -114,8 +168,10 @@ class PipelineParams:
     decode: DecodeParams = field(default_factory=DecodeParams)
     stereo: StereoParams = field(default_factory=StereoParams)
     extraction: Any = None          # tactile_sl_decoder.extraction.ExtractionParams
-    threads: int = 1                # >1: extract left and right concurrently
+    threads: int = 2                # >1: extract + classify left and right concurrently
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
+    switch_interval_ms: float = 1.0  # with threads > 1: Python's GIL switch interval at most
+                                     # this (process-wide; 0 = leave), see _shorten_switch_interval
     classifier_weights: str | None = None      # loaded when needed; None = shipped weights
     classifier_threshold: float | None = None  # None = the threshold stored with the weights
 
@@ -176,7 +232,10 @@ class StereoPipeline:
         self._extractor = extractor
         self._rig: StereoRig | None = None
         self._rig_key: tuple | None = None
-        self._pool = ThreadPoolExecutor(max_workers=2) if self.params.threads > 1 else None
+        self._pool = None
+        if self.params.threads > 1:
+            self._pool = ThreadPoolExecutor(max_workers=2)
+            _shorten_switch_interval(self.params.switch_interval_ms)
 
     # ------------------------------------------------------------------ stages
 
@@ -213,6 +272,28 @@ class StereoPipeline:
             return Glyphs(det.u, det.v, None, None, float(det.spacing_px), gray.shape[1],
                           gray.shape[0], det.area, det.patches)
         return self._map(run, left_gray, right_gray)
+
+    def _extract_classify(self, gray: np.ndarray) -> tuple[Glyphs, float, float, float]:
+        """One image's share of a worker: extraction, k-NN search, classification.
+
+        Returns the glyphs and the extraction, k-NN and classification milliseconds.
+        """
+        t0 = time.perf_counter()
+        det = self._extract(gray)
+        g = Glyphs(det.u, det.v, None, None, float(det.spacing_px), gray.shape[1],
+                   gray.shape[0], det.area, det.patches)
+        t1 = time.perf_counter()
+        g.neighbours = self._neighbours(g)
+        t2 = time.perf_counter()
+        if len(g) and g.patches is not None:
+            label, conf = self._classifier().predict(g.patches)
+            g.label = np.asarray(label, np.uint8)
+            g.confidence = np.asarray(conf, np.float32)
+        return g, 1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (time.perf_counter() - t2)
+
+    def _neighbours(self, g: Glyphs) -> tuple[np.ndarray, np.ndarray]:
+        """k-NN table of one image's glyphs (the lattice search's first step)."""
+        return nearest_neighbours(g.u, g.v, self.params.grid.k_neighbours, g.spacing_px)
 
     def classify_pair(self, left: Glyphs, right: Glyphs) -> None:
         """Label both images' glyphs in one batch (in place)."""
@@ -258,7 +339,17 @@ class StereoPipeline:
         conf = np.concatenate([g.confidence for g in images])
         groups = np.repeat(np.arange(len(images)), sizes)
         hints = [g.spacing_px for g in images if g.spacing_px > 0]
-        grid = build_grid(u, v, self.params.grid, max(hints) if hints else 0.0)
+        # k-NN per image (within an image's 3 spacings: never across images), unless a
+        # worker thread already did it; indices shifted to the joint numbering.
+        dists, idxs = [], []
+        start = 0
+        for g, n in zip(images, sizes):
+            dist, idx = g.neighbours if g.neighbours is not None else self._neighbours(g)
+            dists.append(dist)
+            idxs.append(idx + start)
+            start += n
+        grid = build_grid(u, v, self.params.grid, max(hints) if hints else 0.0,
+                          neighbours=(np.concatenate(dists), np.concatenate(idxs)))
         res = self.decoder.decode(grid, label, conf, groups)
         start = 0
         for g, n in zip(images, sizes):
@@ -311,15 +402,30 @@ class StereoPipeline:
         _check_image(left_gray, rig.left, "left")
         _check_image(right_gray, rig.right, "right")
         t1 = time.perf_counter()
-        left, right = self.extract_pair(left_gray, right_gray)
-        t2 = time.perf_counter()
-        self.classify_pair(left, right)
+        if self._pool is None:
+            left, right = self.extract_pair(left_gray, right_gray)
+            t2 = time.perf_counter()
+            self.classify_pair(left, right)
+        else:
+            # One worker per image: extraction, the lattice's k-NN search and classification
+            # of that image (OpenCV, the k-d tree and the classifier's matrix products
+            # release the GIL).  The stage times are then the slower worker's (overlapping).
+            self._classifier()
+            set_cpu_threads(self.params.cpu_threads)
+            (left, *ms_l), (right, *ms_r) = self._map(self._extract_classify, left_gray,
+                                                      right_gray)
+            worker_ms = [max(a, b) for a, b in zip(ms_l, ms_r)]
         if label_hook is not None:
             label_hook(left, right)
         t3 = time.perf_counter()
         result = self._finish(left, right, rig)
-        result.timings_ms.update(check=1e3 * (t1 - t0), extract=1e3 * (t2 - t1),
-                                 classify=1e3 * (t3 - t2))
+        if self._pool is None:
+            result.timings_ms.update(check=1e3 * (t1 - t0), extract=1e3 * (t2 - t1),
+                                     classify=1e3 * (t3 - t2))
+        else:
+            result.timings_ms.update(check=1e3 * (t1 - t0), extract=worker_ms[0],
+                                     knn=worker_ms[1], classify=worker_ms[2],
+                                     workers=1e3 * (t3 - t1))
         result.timings_ms["total"] = 1e3 * (time.perf_counter() - t0)
         return result
 

@@ -87,8 +87,9 @@ class DecoderNode(Node):
             "Include the glyph patches in symbols_decoded (larger messages)."))
         self.declare_parameter("publish_empty", True, _d(
             "Publish a cloud with no point for frames that decoded nothing."))
-        self.declare_parameter("threads", 1, _d(
-            "Worker threads for the two images of a frame (1 = sequential)."))
+        self.declare_parameter("threads", 2, _d(
+            "Worker threads for the two images of a frame: 2 extracts and classifies them "
+            "concurrently, 1 = sequential."))
         self.declare_parameter("cpu_threads", 1, _d(
             "Intra-op threads of OpenCV and torch in this process (0 = library defaults); "
             "1 avoids oversubscription on small shared machines."))
