@@ -89,35 +89,35 @@ def _best_four(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.ndarr
                ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per glyph, the shortest neighbour step within angle/length gates of +-col, +-row.
 
-    Four (displacement (N, 2) NaN where none, k-NN column (N,) -1 where none) pairs.
+    Four (found (N,) bool, flat index into the (N, K) candidate arrays) pairs, for +col,
+    -col, +row, -row.  Candidates come sorted by distance, so the shortest one within the
+    gates is the first one.
     """
-    inv = 1.0 / np.maximum(dist, 1e-12)
-    cos_c = (du * col_dir[0] + dv * col_dir[1]) * inv
-    cos_r = (du * row_dir[0] + dv * row_dir[1]) * inv
+    n, kk = dist.shape
     gate = valid & (dist > p.init_min_len * spacing) & (dist < p.init_max_len * spacing)
-    t = np.cos(np.radians(p.init_angle_deg))
-    kk = dist.shape[1]
-    base = np.arange(dist.shape[0]) * kk
-    gated = np.where(gate, dist, np.inf)
-    flat_u, flat_v = du.reshape(-1), dv.reshape(-1)
+    td = np.cos(np.radians(p.init_angle_deg)) * dist      # cos(angle) > t  <=>  dot > t |d|
+    base = np.arange(n) * kk
     out = []
-    for ok in (cos_c > t, cos_c < -t, cos_r > t, cos_r < -t):
-        score = np.where(ok, gated, np.inf)
-        k = np.argmin(score, axis=1)
-        at = base + k
-        none = score.reshape(-1)[at] == np.inf
-        step = np.column_stack([flat_u[at], flat_v[at]])
-        step[none] = np.nan
-        out.append((step, np.where(none, -1, k)))
+    for axis in (col_dir, row_dir):
+        dot = du * axis[0] + dv * axis[1]
+        for ok in (dot > td, dot < -td):
+            ok &= gate
+            at = base + ok.argmax(axis=1)
+            out.append((ok.reshape(-1)[at], at))
     return out
 
 
-def _combine(forward: np.ndarray, backward: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """Mean of the forward step and the negated backward step, whichever exist."""
-    fwd = np.isfinite(forward[:, :1])
-    bwd = np.isfinite(backward[:, :1])
-    total = np.where(fwd, forward, 0.0) + np.where(bwd, -backward, 0.0)
-    count = fwd.astype(np.float64) + bwd
+def _combine(du: np.ndarray, dv: np.ndarray, forward: tuple[np.ndarray, np.ndarray],
+             backward: tuple[np.ndarray, np.ndarray], fallback: np.ndarray) -> np.ndarray:
+    """Mean of the forward step and the negated backward step, whichever exist (N, 2)."""
+    (fwd, fat), (bwd, bat) = forward, backward
+    flat_u, flat_v = du.reshape(-1), dv.reshape(-1)
+    f = fwd[:, None]
+    b = bwd[:, None]
+    fstep = np.column_stack([flat_u[fat], flat_v[fat]])
+    bstep = np.column_stack([flat_u[bat], flat_v[bat]])
+    total = np.where(f, fstep, 0.0) + np.where(b, -bstep, 0.0)
+    count = f.astype(np.float64) + b
     with np.errstate(invalid="ignore", divide="ignore"):
         out = total / count
     return np.where(count > 0, out, fallback)
@@ -193,10 +193,10 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
 
     # Local lattice vectors, following stretching: the best-aligned neighbour each way.
     steps = _best_four(du, dv, dist, valid, col_dir, row_dir, spacing, p)
-    col_vec = _combine(steps[0][0], steps[1][0], col_dir * spacing)
-    row_vec = _combine(steps[2][0], steps[3][0], row_dir * spacing)
-    kcol = np.stack([kk for _, kk in steps], axis=1)                  # (N, 4)
-    nbr4 = np.where(kcol >= 0, np.take_along_axis(idx, np.maximum(kcol, 0), axis=1), -1)
+    col_vec = _combine(du, dv, steps[0], steps[1], col_dir * spacing)
+    row_vec = _combine(du, dv, steps[2], steps[3], row_dir * spacing)
+    flat_idx = idx.reshape(-1)
+    nbr4 = np.column_stack([np.where(found, flat_idx[at], -1) for found, at in steps])
     # Smooth them over the 4-neighbourhood (a median: one wrong link does not matter).
     for _ in range(p.smooth_iterations):
         both = _smooth(np.concatenate([col_vec, row_vec], axis=1), nbr4)
@@ -295,9 +295,12 @@ def _match_fast(du: np.ndarray, dv: np.ndarray, du32: np.ndarray, dv32: np.ndarr
     norm = np.hypot(c0, c1) * np.hypot(r0, r1)
     good = np.abs(det[:, 0]) > (2.0 * match_tol + 0.05) * norm[:, 0]
     inv = np.where(good[:, None], 1.0 / np.where(good[:, None], det, 1.0), 0.0)
-    a = np.rint((du * r1 - dv * r0) * inv)                        # column steps
-    b = np.rint((dv * c0 - du * c1) * inv)                        # row steps
-    code = 3.0 * b + a + 4.0                                      # 3 * (dr + 1) + (dc + 1)
+    # Lattice coordinates in float32: only their rounding matters, with a wide margin.
+    f32 = np.float32
+    inv = inv.astype(f32)
+    a = np.rint((du32 * r1.astype(f32) - dv32 * r0.astype(f32)) * inv)   # column steps
+    b = np.rint((dv32 * c0.astype(f32) - du32 * c1.astype(f32)) * inv)   # row steps
+    code = 3 * b + a + 4                                          # 3 * (dr + 1) + (dc + 1)
     ok = valid & (np.abs(a) <= 1) & (np.abs(b) <= 1) & (code != CENTRE)
     slot = np.where(ok, code - (code > CENTRE), 0).astype(np.intp)   # 0..7 (_OTHERS order)
     flat = slot + (np.arange(n) * 8)[:, None]

@@ -129,6 +129,8 @@ class Glyphs:
     neighbours: tuple[np.ndarray, np.ndarray] | None = None
     """k-NN table of (u, v) (:func:`~tactile_sl_decoder.grid.nearest_neighbours`), if the
     pipeline computed it already (in a worker thread); else decoding computes it."""
+    rectified: np.ndarray | None = None
+    """(N, 2) undistorted + rectified pixels of (u, v), if a worker computed them already."""
 
     def __post_init__(self) -> None:
         self.u = np.asarray(self.u, dtype=np.float32).reshape(-1)
@@ -273,17 +275,23 @@ class StereoPipeline:
                           gray.shape[0], det.area, det.patches)
         return self._map(run, left_gray, right_gray)
 
-    def _extract_classify(self, gray: np.ndarray) -> tuple[Glyphs, float, float, float]:
-        """One image's share of a worker: extraction, k-NN search, classification.
+    def _extract_classify(self, job: tuple[np.ndarray, Any]
+                          ) -> tuple[Glyphs, float, float, float]:
+        """One image's share of a worker: extract, find neighbours, rectify, classify.
 
-        Returns the glyphs and the extraction, k-NN and classification milliseconds.
+        ``job`` is (grey image, its CameraCalibration).  The k-NN table and the rectified
+        pixels of the glyph centres are kept with the glyphs for decoding and stereo.
+        Returns the glyphs and the extraction, k-NN (+ rectification) and classification
+        milliseconds.
         """
+        gray, cam = job
         t0 = time.perf_counter()
         det = self._extract(gray)
         g = Glyphs(det.u, det.v, None, None, float(det.spacing_px), gray.shape[1],
                    gray.shape[0], det.area, det.patches)
         t1 = time.perf_counter()
         g.neighbours = self._neighbours(g)
+        g.rectified = StereoRig.rectify(cam, np.column_stack([g.u, g.v]).astype(np.float64))
         t2 = time.perf_counter()
         if len(g) and g.patches is not None:
             label, conf = self._classifier().predict(g.patches)
@@ -385,7 +393,12 @@ class StereoPipeline:
         cr = np.where(right.row >= 0, right.row.astype(np.int64) * ncols + right.col, -1)
         uv_l = np.column_stack([left.u, left.v]).astype(np.float64)
         uv_r = np.column_stack([right.u, right.v]).astype(np.float64)
-        m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, self.params.stereo)
+        rect_l, rect_r = left.rectified, right.rectified
+        if rect_l is None or rect_r is None or len(rect_l) != len(uv_l) or len(rect_r) != len(
+                uv_r):
+            rect_l = rect_r = None                       # rectify the matched ones only
+        m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, self.params.stereo,
+                                  rect_l, rect_r)
         return pack_points(m.xyz, m.row, m.col), m.rejected
 
     # ------------------------------------------------------------------ whole frames
@@ -412,8 +425,8 @@ class StereoPipeline:
             # release the GIL).  The stage times are then the slower worker's (overlapping).
             self._classifier()
             set_cpu_threads(self.params.cpu_threads)
-            (left, *ms_l), (right, *ms_r) = self._map(self._extract_classify, left_gray,
-                                                      right_gray)
+            (left, *ms_l), (right, *ms_r) = self._map(
+                self._extract_classify, (left_gray, rig.left), (right_gray, rig.right))
             worker_ms = [max(a, b) for a, b in zip(ms_l, ms_r)]
         if label_hook is not None:
             label_hook(left, right)

@@ -144,10 +144,14 @@ class StereoMatch:
 
 def match_and_triangulate(rig: StereoRig, uv_left: np.ndarray, cell_left: np.ndarray,
                           uv_right: np.ndarray, cell_right: np.ndarray, ncols: int,
-                          params: StereoParams | None = None) -> StereoMatch:
+                          params: StereoParams | None = None,
+                          rect_left: np.ndarray | None = None,
+                          rect_right: np.ndarray | None = None) -> StereoMatch:
     """Pair glyphs decoded to the same cell in both images, triangulate, gate.
 
     Cells are ``row * ncols + col`` (-1 unknown) and must be unique per image.
+    ``rect_left`` / ``rect_right``: every glyph's rectified pixels (:meth:`StereoRig.rectify`
+    of ``uv_left`` / ``uv_right``), if already computed; the result is the same.
     """
     p = params or StereoParams()
     cell_left = np.asarray(cell_left, dtype=np.int64)
@@ -157,7 +161,12 @@ def match_and_triangulate(rig: StereoRig, uv_left: np.ndarray, cell_left: np.nda
     common, a, b = np.intersect1d(cell_left[il], cell_right[ir], assume_unique=True,
                                   return_indices=True)
     il, ir = il[a], ir[b]
-    xyz, err = rig.triangulate(np.asarray(uv_left)[il], np.asarray(uv_right)[ir])
+    if rect_left is not None and rect_right is not None:
+        x_rect, err = rig.triangulate_rectified(np.asarray(rect_left)[il],
+                                                np.asarray(rect_right)[ir])
+        xyz = x_rect @ rig.left.R
+    else:
+        xyz, err = rig.triangulate(np.asarray(uv_left)[il], np.asarray(uv_right)[ir])
     good = (err <= p.max_reprojection_px) & np.isfinite(xyz).all(axis=1)
     good &= (xyz[:, 2] >= p.min_depth_m) & (xyz[:, 2] <= p.max_depth_m)
     cells = common[good]
