@@ -1,16 +1,20 @@
 """Glyph classification: load the shipped LeNet weights and label patches fast on one core.
 
-Training uses torch (:mod:`tactile_sl_decoder.model`); inference runs the same function in
-numpy, because torch's default CPU path costs 7-9 ms for 1,000 patches of a net this small
-(framework overhead per layer, tiny convolutions), against a 4 ms budget. The numpy path
-turns each convolution into a few large matrix products:
+Training uses torch (:mod:`tactile_sl_decoder.model`); inference computes the same function
+as a handful of large matrix products (torch tensors, single calls that release the GIL),
+because torch's default CPU path costs 7-9 ms for 1,000 patches of a net this small
+(framework overhead per layer, tiny convolutions), against a 4 ms budget:
 
-* conv1: output row r depends on input rows r..r+4, i.e. on 90 consecutive values of the
-  flattened 18x18 patch; one (N, 90) x (90, 84) product per output row (a banded "Toeplitz"
-  matrix holding the 5x5 kernels) yields all 14 columns x 6 channels of that row, with the
-  columns ordered even-then-odd so that 2x2 max-pooling is a max of contiguous halves;
+* conv1: output row r depends on input rows r..r+4. The 14 output columns are split into
+  blocks 0..7 and 8..13 (pooling pairs never straddle them), which read input columns 0..11
+  and 8..17; laid out block by block, the 5 input rows of an output row are 60 (or 50)
+  consecutive values, and one (N, 60) x (60, 48) plus one (N, 50) x (50, 36) product with
+  banded "Toeplitz" matrices holding the 5x5 kernels yield all 14 columns x 6 channels of
+  that row, ordered (pooled column, parity, channel) so that 2x2 max-pooling is two
+  elementwise maxima; it runs one pooled row at a time in buffers that stay in cache;
 * conv2 likewise, summing five (N, 42) x (42, 48) products per output row;
-* bias and ReLU are applied after pooling (both commute with max).
+* the per-patch standardisation, bias and ReLU are applied after pooling (all commute
+  with max).
 
 Each prediction carries the softmax probability of its label; below the confidence
 threshold (default :data:`DEFAULT_THRESHOLD`) the label is 255 (unknown), so the decoder
@@ -71,7 +75,8 @@ def check_state(state: dict[str, Any]) -> int:
 class FastLeNet:
     """The numpy form of :class:`tactile_sl_decoder.model.GlyphNet` (same outputs, ~1e-5)."""
 
-    t1: np.ndarray  # (55, 2, 42): banded conv1 matrices of the two 7-column output blocks
+    t1a: np.ndarray  # (60, 48) banded conv1 matrix: 5 rows x input cols 0..11 -> cols 0..7
+    t1b: np.ndarray  # (50, 36) banded conv1 matrix: 5 rows x input cols 8..17 -> cols 8..13
     s1: np.ndarray  # (42,) sum of each conv1 kernel, tiled over 7 pooled columns
     b1: np.ndarray  # (42,) conv1 bias, tiled likewise
     t2: np.ndarray  # (210, 48) banded conv2 matrix: 5 rows x (7 cols, 6 ch) -> (3 cols, 16 ch)
@@ -84,9 +89,9 @@ class FastLeNet:
     b5: np.ndarray
     _torch: dict[str, Any] | None = field(default=None, repr=False)
 
-    # output-column order inside the two conv1 blocks, chosen so that 2x2 pooling reads
-    # contiguous slices: block 0 = columns 0..6, block 1 = columns 7..13
-    _ORDER = ((0, 2, 4, 6, 1, 3, 5), (8, 10, 12, 7, 9, 11, 13))
+    # conv1 output columns are split into two blocks that pooling never straddles, 0..7 and
+    # 8..13, and ordered (pooled column, column parity, channel) inside each block
+    _BLOCKS = ((0, 8, 12), (8, 14, 10))  # (first output col, end output col, input cols)
 
     @staticmethod
     def from_state(state: dict[str, Any]) -> FastLeNet:
@@ -94,11 +99,14 @@ class FastLeNet:
         check_state(state)
         s = {k: np.asarray(v, dtype=np.float32) for k, v in state.items()}
         w1, w2 = s["conv1.weight"], s["conv2.weight"]
-        t1 = np.zeros((2, 5, 11, 7, 6), np.float32)  # (block, dy, in col, out slot, ch)
-        for block, order in enumerate(FastLeNet._ORDER):
-            for slot, c in enumerate(order):
+        t1 = []
+        for first, end, width in FastLeNet._BLOCKS:
+            # (dy, input col, pooled col, parity, channel)
+            t = np.zeros((5, width, (end - first) // 2, 2, 6), np.float32)
+            for c in range(first, end):
                 for dx in range(5):
-                    t1[block, :, c - 7 * block + dx, slot, :] = w1[:, 0, :, dx].T
+                    t[:, c - first + dx, (c - first) // 2, (c - first) % 2, :] = w1[:, 0, :, dx].T
+            t1.append(np.ascontiguousarray(t.reshape(5 * width, 6 * (end - first))))
         t2 = np.zeros((5, 7, 6, 3, 16), np.float32)  # (dy, in col, in ch, out col, out ch)
         for c in range(3):
             for dx in range(5):
@@ -106,13 +114,17 @@ class FastLeNet:
         # torch flattens (channel, row, col); our pooled features are (row, col, channel)
         w3 = s["fc1.weight"].reshape(32, 16, 2, 2).transpose(2, 3, 1, 0).reshape(64, 32)
         return FastLeNet(
-            np.ascontiguousarray(t1.reshape(2, 55, 42)), np.tile(w1.sum(axis=(1, 2, 3)), 7),
+            t1[0], t1[1], np.tile(w1.sum(axis=(1, 2, 3)), 7),
             np.tile(s["conv1.bias"], 7), t2.reshape(210, 48), np.tile(s["conv2.bias"], 4),
             np.ascontiguousarray(w3), s["fc1.bias"], np.ascontiguousarray(s["fc2.weight"].T),
             s["fc2.bias"], np.ascontiguousarray(s["out.weight"].T), s["out.bias"])
 
     def logits(self, patches: np.ndarray) -> np.ndarray:
         """(N, classes) logits of (N, 18, 18) uint8 patches."""
+        return self.logits_tensor(patches).numpy()
+
+    def logits_tensor(self, patches: np.ndarray) -> Any:
+        """:meth:`logits` as a float32 torch tensor."""
         import torch
 
         if self._torch is None:
@@ -128,25 +140,29 @@ class FastLeNet:
             mean = x.mean(dim=1)
             var = (x * x).mean(dim=1) - mean * mean
             inv = 1.0 / (var.clamp_min(0.0).sqrt() + 1.0)
-            # two 7-column output blocks of 11 input columns each, laid out so that the 5x11
-            # input of one output row is 55 consecutive values
-            x = x.reshape(n, PATCH, PATCH)
-            flat = torch.stack((x[:, :, 0:11], x[:, :, 7:18])).reshape(2, n, PATCH * 11)
-            # even and odd output rows in separate buffers: row pooling is then one
-            # elementwise max of two contiguous arrays
-            y = torch.empty((2, 2, 7, n, 42))  # (row parity, block, pooled row, patch, col)
-            for b in range(2):
-                for r in range(14):  # 28 matrix products, not a loop over glyphs
-                    torch.matmul(flat[b, :, r * 11:r * 11 + 55], w["t1"][b],
-                                 out=y[r % 2, b, r // 2])
-            y = torch.maximum(y[0], y[1], out=y[0])  # (block, pooled row, patch, 42)
+            # the two column blocks' inputs, laid out so that the 5 input rows of one output
+            # row are consecutive values
+            x = x.view(n, PATCH, PATCH)
+            fa = x[:, :, 0:12].contiguous().view(n, PATCH * 12)
+            fb = x[:, :, 8:18].contiguous().view(n, PATCH * 10)
+            # one pooled row at a time, in two (N, 84) buffers that stay in cache: the even
+            # and the odd conv1 row, their maximum, then the maximum of column pairs
+            even = torch.empty((n, 84))
+            odd = torch.empty((n, 84))
+            pairs = even.view(n, 7, 2, 6)
             p1 = torch.empty((7, n, 42))  # (pooled row, patch, (pooled col, channel))
-            torch.maximum(y[0, ..., 0:18], y[0, ..., 24:42], out=p1[..., 0:18])  # cols 0|1..
-            torch.maximum(y[0, ..., 18:24], y[1, ..., 18:24], out=p1[..., 18:24])  # 6|7
-            torch.maximum(y[1, ..., 0:18], y[1, ..., 24:42], out=p1[..., 24:42])  # 8|9..
-            p1 -= mean[:, None] * w["s1"][None, :]
-            p1 *= inv[:, None]
-            p1 += w["b1"]
+            ta, tb = w["t1a"], w["t1b"]
+            for k in range(7):  # 28 matrix products and 14 maxima, not a loop over glyphs
+                r = 2 * k
+                torch.mm(fa[:, r * 12:r * 12 + 60], ta, out=even[:, 0:48])
+                torch.mm(fb[:, r * 10:r * 10 + 50], tb, out=even[:, 48:84])
+                torch.mm(fa[:, r * 12 + 12:r * 12 + 72], ta, out=odd[:, 0:48])
+                torch.mm(fb[:, r * 10 + 10:r * 10 + 60], tb, out=odd[:, 48:84])
+                torch.maximum(even, odd, out=even)
+                torch.maximum(pairs[:, :, 0], pairs[:, :, 1], out=p1[k].view(n, 7, 6))
+            # relu((p1 - mean * s1) * inv + b1) = relu(p1 * inv + (b1 - mean * inv * s1))
+            shift = w["b1"] - (mean * inv)[:, None] * w["s1"]
+            torch.addcmul(shift, p1, inv[:, None], out=p1)
             p1.clamp_(min=0.0)
             z = torch.empty((3, n, 48))
             for q in range(3):  # conv2 output row q = sum over its 5 kernel rows
@@ -161,7 +177,7 @@ class FastLeNet:
             feats.clamp_(min=0.0)
             h = torch.addmm(w["b3"], feats, w["w3"]).clamp_(min=0.0)
             h = torch.addmm(w["b4"], h, w["w4"]).clamp_(min=0.0)
-            return torch.addmm(w["b5"], h, w["w5"]).numpy()
+            return torch.addmm(w["b5"], h, w["w5"])
 
 
 @dataclass
@@ -213,22 +229,27 @@ class Classifier:
 
     def probabilities(self, patches: np.ndarray) -> np.ndarray:
         """(N, classes) softmax probabilities of (N, 18, 18) uint8 patches."""
-        patches = _check_patches(patches)
-        if len(patches) == 0:
-            return np.zeros((0, self.classes), np.float32)
-        z = self.net.logits(patches)
-        z -= z.max(axis=1, keepdims=True)
-        np.exp(z, out=z)
-        z /= z.sum(axis=1, keepdims=True)
-        return z
+        return self._probabilities(patches).numpy()
 
     def predict(self, patches: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Labels (uint8, 255 below the threshold) and confidences (float32) of patches."""
-        prob = self.probabilities(patches)
-        label = prob.argmax(axis=1).astype(np.uint8)
-        conf = prob.max(axis=1).astype(np.float32) if len(prob) else np.zeros(0, np.float32)
+        prob = self._probabilities(patches)
+        if prob.shape[0] == 0:
+            return np.zeros(0, np.uint8), np.zeros(0, np.float32)
+        conf, label = prob.max(dim=1)
+        conf, label = conf.numpy(), label.numpy().astype(np.uint8)
         label[conf < self.threshold] = LABEL_UNKNOWN
         return label, conf
+
+    def _probabilities(self, patches: np.ndarray) -> Any:
+        import torch
+
+        patches = _check_patches(patches)
+        if len(patches) == 0:
+            return torch.zeros((0, self.classes))
+        z = self.net.logits_tensor(patches)
+        with torch.inference_mode():
+            return torch.softmax(z, dim=1)
 
 
 def _to_numpy(value: Any) -> np.ndarray:
