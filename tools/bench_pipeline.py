@@ -8,6 +8,9 @@
 In-process: median milliseconds per stereo pair with the per-stage breakdown (check,
 extraction, classification, lattice + decoding, stereo), over every frame of the bags,
 and the end-to-end accuracy table (coverage, wrong cells, 3-D error against ground truth).
+With --threads 2 (the default, as the node) each image runs in its own worker: extract,
+knn (the lattice's k-NN search + rectification of the glyph centres) and classify are then
+the slower worker's times, which overlap; "workers" is the wall time of that part.
 
 --flip R: after classification, each known label is flipped to another symbol with
 probability R (same pipeline otherwise); prints coverage and wrong cells with and without.
