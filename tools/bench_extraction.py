@@ -2,12 +2,15 @@
 """Median time per 640x480 image of glyph extraction and classification on ONE core.
 
 Usage: python tools/bench_extraction.py [--repeat 200] [--bag bags/sphere_deep_small.mcap]
+                                       [--stages]
 
 Images: synthetic glyph grids (~1,000-1,150 glyphs, tactile_sl_decoder.synth_glyphs) and,
 if given, the left images of a bag. Threads of OpenBLAS/OpenMP/torch/OpenCV are limited to
 one and the process is pinned to one CPU. Prints the median and 90th percentile of the wall
 time and of the thread CPU time (the latter is what a core actually spent; on a shared, busy
 machine the wall time also counts time the scheduler gave to other processes).
+--stages adds the thread-CPU median of each extraction stage, timed alone on the first
+image of each set (so with warmer caches than inside the full call).
 """
 from __future__ import annotations
 
@@ -23,6 +26,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from tactile_sl_decoder import extraction as ex  # noqa: E402
 from tactile_sl_decoder.classifier import Classifier  # noqa: E402
 from tactile_sl_decoder.extraction import extract_symbols  # noqa: E402
 from tactile_sl_decoder.synth_glyphs import synth_image  # noqa: E402
@@ -57,6 +61,29 @@ def _cycle(fn, items: list) -> callable:
     return call
 
 
+def stage_rows(gray: np.ndarray, repeat: int) -> list[str]:
+    """Thread-CPU median of each extraction stage on one image, timed alone."""
+    params = ex.ExtractionParams()
+    det = extract_symbols(gray, params)
+    mask = ex.threshold_ink(gray, params)
+    ox, oy, roi = ex._ink_box(mask)
+    step = det.local_spacing * np.float32(params.patch_span / params.patch_size)
+    patches = ex.sample_patches(gray, det.u, det.v, step, params.patch_size)
+    area = float(np.median(det.area))
+    stages = {
+        "threshold + opening": lambda: ex.threshold_ink(gray, params),
+        "connected regions": lambda: cv2.connectedComponentsWithStatsWithAlgorithm(
+            roi, 8, cv2.CV_32S, cv2.CCL_BBDT),
+        "spacing": lambda: ex.estimate_spacing(det.u, det.v, params.default_spacing_px,
+                                               search_px=2.4 * np.sqrt(area)),
+        "patch resampling": lambda: ex.sample_patches(gray, det.u, det.v, step,
+                                                      params.patch_size),
+        "centre refinement": lambda: ex.patch_centroid_offset(patches, params.dark_glyphs),
+    }
+    return [f"    {name:22s} cpu median {np.median(timed(fn, repeat)[1]):6.3f} ms"
+            for name, fn in stages.items()]
+
+
 def bag_images(path: str, count: int) -> list[np.ndarray]:
     """The first ``count`` left images of a bag, grey."""
     from tactile_sl_camera.bag_io import BagReader
@@ -75,6 +102,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=200, help="timed calls per image set")
     parser.add_argument("--bag", default=None, help="also time the left images of this bag")
+    parser.add_argument("--stages", action="store_true",
+                        help="also time each extraction stage alone")
     args = parser.parse_args()
     torch.set_num_threads(1)
     cv2.setNumThreads(1)
@@ -93,6 +122,8 @@ def main() -> int:
         glyphs = int(np.mean([len(d) for d in dets]))
         wall, cpu = timed(_cycle(extract_symbols, images), args.repeat)
         print(line(f"extraction  [{name}]", wall, cpu, f"{glyphs} glyphs/image"))
+        if args.stages:
+            print("\n".join(stage_rows(images[0], args.repeat)))
         wall, cpu = timed(_cycle(clf.predict, [d.patches for d in dets]), args.repeat)
         print(line(f"classification [{name}]", wall, cpu, f"{glyphs} patches/image"))
     return 0

@@ -151,3 +151,34 @@ def test_spacing_estimate_on_a_lattice():
     spacing2, local2 = estimate_spacing(u, v)  # k-nearest path
     assert spacing2 == pytest.approx(17.0, abs=1e-3) and np.allclose(local2, 17.0, atol=1e-3)
     assert estimate_spacing(u[:1], v[:1])[0] == 0.0
+
+
+@pytest.mark.parametrize("offset", [-2.0, 0.0, 0.5, 1.0, 7.5, 8.0, 20.0])
+@pytest.mark.parametrize("dark", [True, False])
+def test_threshold_matches_cv2_adaptive_threshold(offset, dark):
+    gray = synth_image(np.random.default_rng(3), spacing=17.0).gray
+    gray = gray if dark else 255 - gray
+    params = ExtractionParams(offset=offset, dark_glyphs=dark, open_size=1)
+    mode = cv2.THRESH_BINARY_INV if dark else cv2.THRESH_BINARY
+    ref = cv2.adaptiveThreshold(gray, 255, cv2.ADAPTIVE_THRESH_MEAN_C, mode,
+                                params.block_size, offset if dark else -offset)
+    np.testing.assert_array_equal(threshold_ink(gray, params), ref)
+
+
+@pytest.mark.parametrize("x0,y0,w,h", [(0, 0, 640, 480), (37, 11, 301, 200),
+                                       (116, 0, 524, 480), (3, 5, 77, 101)])
+def test_ink_box_labels_like_the_whole_image(x0, y0, w, h):
+    """Labelling only the (even-aligned) ink box gives the same regions in the same order."""
+    from tactile_sl_decoder.extraction import _ink_box
+
+    gray = np.ascontiguousarray(synth_image(np.random.default_rng(4), spacing=16.0).gray[
+        y0:y0 + h, x0:x0 + w])
+    gray[:, : w // 5] = 210  # blank margin: the box no longer spans the image
+    mask = threshold_ink(gray, ExtractionParams())
+    n, _, stats, cent = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    ox, oy, roi = _ink_box(mask)
+    assert ox % 2 == 0 and oy % 2 == 0 and roi.shape[0] % 2 == 0 and roi.shape[1] % 2 == 0
+    n2, _, stats2, cent2 = cv2.connectedComponentsWithStats(roi, connectivity=8)
+    assert n2 == n
+    np.testing.assert_array_equal(stats2[1:, cv2.CC_STAT_AREA], stats[1:, cv2.CC_STAT_AREA])
+    np.testing.assert_allclose(cent2[1:] + (ox, oy), cent[1:], atol=1e-9)
