@@ -8,6 +8,10 @@ nodes' SymbolArrays) and by ``tactile-sl replay``, so the ROS graph and the offl
 produce identical points for the same input.  Inputs are checked here (sizes against
 CameraInfo, degenerate calibration) and problems raise :class:`PipelineInputError` with a
 message meant for the user; callers skip the frame and carry on.
+
+Glyph arrays (:mod:`.glyphs`), bag frames and stereo pairing (:mod:`.frames`) and library
+thread settings (:mod:`.cpu_threads`) live in their own modules; their public names are
+re-exported here.
 """
 from __future__ import annotations
 
@@ -22,144 +26,23 @@ import numpy as np
 from tactile_sl_camera.camera_info import CameraInfoError
 from tactile_sl_camera.clouds import POINT_DTYPE, pack_points
 from tactile_sl_decoder.codewords import Codebook, CodewordDecoder, DecodeParams
+from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
+from tactile_sl_decoder.frames import (  # noqa: F401
+    BagFrame,
+    StereoSync,
+    SyncEvent,
+    bag_frames,
+    bag_topics,
+    count_bag_frames,
+)
+from tactile_sl_decoder.glyphs import (  # noqa: F401
+    LABEL_UNKNOWN,
+    Glyphs,
+    PipelineInputError,
+    glyphs_from_symbol_array,
+)
 from tactile_sl_decoder.grid import GridParams, build_grid, nearest_neighbours
 from tactile_sl_decoder.stereo import StereoParams, StereoRig, match_and_triangulate
-
-LABEL_UNKNOWN = 255
-
-
-def set_cpu_threads(n: int, torch_too: bool = True) -> None:
-    """Intra-op threads of OpenCV, OpenBLAS and torch for this process (0 = leave them).
-
-    Per frame the work is small (a few ms): with several threads per library on a small,
-    shared machine the threads wait on each other (torch inference measured 500 ms instead of
-    6 ms with 2 threads on 2 busy cores), so the pipeline runs them single-threaded.
-    """
-    if n <= 0:
-        return
-    import cv2
-
-    if cv2.getNumThreads() != n:
-        cv2.setNumThreads(n)
-    _set_blas_threads(n)
-    if not torch_too:
-        return
-    try:
-        import torch
-
-        if torch.get_num_threads() != n:
-            torch.set_num_threads(n)
-    except ImportError:
-        pass
-
-
-_BLAS_THREADS: list[int] = []      # the thread count last given to the loaded OpenBLAS copies
-
-
-def _set_blas_threads(n: int) -> None:
-    """Threads of every OpenBLAS copy loaded in this process (numpy's, scipy's, OpenCV's).
-
-    numpy's matrix products (the classifier) otherwise start one BLAS thread per core: with
-    the two images classified in two workers on two cores, those threads spin against each
-    other (measured: extraction + classification 12 ms instead of 9 ms per stereo pair).
-    Done once per count; libraries that are not loaded are left alone.
-    """
-    if _BLAS_THREADS == [n]:
-        return
-    import ctypes
-
-    try:
-        with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
-            paths = {line.split()[-1] for line in fh if "openblas" in line.lower()}
-        libs = {p for p in paths
-                if p.startswith("/") and "openblas" in p.rsplit("/", 1)[-1].lower()}
-    except OSError:
-        libs = set()
-    for path in sorted(libs):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for name in ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
-                     "openblas_set_num_threads64_", "openblas_set_num_threads"):
-            fn = getattr(lib, name, None)
-            if fn is not None:
-                fn(ctypes.c_int(n))
-                break
-    _BLAS_THREADS[:] = [n]
-
-
-def _shorten_switch_interval(ms: float) -> None:
-    """Lower Python's GIL switch interval (process-wide) to at most ``ms`` milliseconds.
-
-    A worker returning from a GIL-free call (OpenCV, the k-d tree, a matrix product) waits
-    for the GIL until the other worker, busy with small numpy operations, is forced to hand
-    it over: by default after 5 ms.  With the two images in two workers that wait dominated
-    (stereo pair 21 ms at 5 ms, 16 ms at 1 ms; 0.2 ms gains nothing more).
-    """
-    import sys
-
-    if ms > 0 and sys.getswitchinterval() > 1e-3 * ms:
-        sys.setswitchinterval(1e-3 * ms)
-
-
-class PipelineInputError(ValueError):
-    """A stereo frame the pipeline cannot process (the message says why)."""
-
-
-@dataclass
-class Glyphs:
-    """Glyphs of one image as flat arrays (the SymbolArray fields, without ROS).
-
-    Coordinates are raw (distorted) pixels, OpenCV convention.  ``row``/``col`` are -1 until
-    decoded, ``label`` 255 and ``confidence`` 0 until classified.
-    """
-
-    u: np.ndarray
-    v: np.ndarray
-    label: np.ndarray
-    confidence: np.ndarray
-    spacing_px: float = 0.0
-    image_width: int = 0
-    image_height: int = 0
-    area: np.ndarray | None = None
-    patches: np.ndarray | None = None     # (N, P, P) uint8
-    row: np.ndarray | None = None
-    col: np.ndarray | None = None
-    neighbours: tuple[np.ndarray, np.ndarray] | None = None
-    """k-NN table of (u, v) (:func:`~tactile_sl_decoder.grid.nearest_neighbours`), if the
-    pipeline computed it already (in a worker thread); else decoding computes it."""
-    rectified: np.ndarray | None = None
-    """(N, 2) undistorted + rectified pixels of (u, v), if a worker computed them already."""
-
-    def __post_init__(self) -> None:
-        self.u = np.asarray(self.u, dtype=np.float32).reshape(-1)
-        self.v = np.asarray(self.v, dtype=np.float32).reshape(-1)
-        n = len(self.u)
-        if len(self.v) != n:
-            raise PipelineInputError(f"glyph arrays differ in length (u {n}, v {len(self.v)})")
-        self.label = _field(self.label, n, np.uint8, LABEL_UNKNOWN, "label")
-        self.confidence = _field(self.confidence, n, np.float32, 0.0, "confidence")
-        self.area = _field(self.area, n, np.float32, 0.0, "area")
-        self.row = _field(self.row, n, np.int32, -1, "row")
-        self.col = _field(self.col, n, np.int32, -1, "col")
-
-    def __len__(self) -> int:
-        return len(self.u)
-
-    @property
-    def decoded(self) -> np.ndarray:
-        """Mask of glyphs with a cell."""
-        return self.row >= 0
-
-
-def _field(value: Any, n: int, dtype: Any, fill: Any, name: str) -> np.ndarray:
-    if value is None:
-        return np.full(n, fill, dtype=dtype)
-    arr = np.asarray(value, dtype=dtype).reshape(-1)
-    if len(arr) != n:
-        raise PipelineInputError(f"glyph field {name!r} has {len(arr)} values, expected {n}")
-    return arr
 
 
 @dataclass
@@ -173,7 +56,7 @@ class PipelineParams:
     threads: int = 2                # >1: extract + classify left and right concurrently
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
     switch_interval_ms: float = 1.0  # with threads > 1: Python's GIL switch interval at most
-                                     # this (process-wide; 0 = leave), see _shorten_switch_interval
+                                     # this (process-wide; 0 = leave), see shorten_switch_interval
     classifier_weights: str | None = None      # loaded when needed; None = shipped weights
     classifier_threshold: float | None = None  # None = the threshold stored with the weights
 
@@ -237,7 +120,7 @@ class StereoPipeline:
         self._pool = None
         if self.params.threads > 1:
             self._pool = ThreadPoolExecutor(max_workers=2)
-            _shorten_switch_interval(self.params.switch_interval_ms)
+            shorten_switch_interval(self.params.switch_interval_ms)
 
     # ------------------------------------------------------------------ stages
 
@@ -517,200 +400,3 @@ def _check_image(gray: np.ndarray, cam: Any, side: str) -> None:
 def empty_points() -> np.ndarray:
     """A cloud with no point (frames that decoded nothing)."""
     return np.zeros(0, dtype=POINT_DTYPE)
-
-
-# ---------------------------------------------------------------------- bags (offline)
-
-
-@dataclass
-class BagFrame:
-    """One stereo frame of a bag: the four input messages (decoded) and ground truth."""
-
-    stamp: tuple[int, int]
-    left_image: Any
-    right_image: Any
-    left_info: Any
-    right_info: Any
-    ground_truth: Any = None
-
-    @property
-    def stamp_ns(self) -> int:
-        """Stamp in nanoseconds (for sorting and keys; the message keeps the exact ints)."""
-        return self.stamp[0] * 1_000_000_000 + self.stamp[1]
-
-
-def bag_topics(namespace: str = "/tactile") -> dict[str, str]:
-    """Topic of each frame part in a bag recorded in ``namespace``."""
-    ns = namespace.rstrip("/")
-    return {"left_image": f"{ns}/left/image_raw", "right_image": f"{ns}/right/image_raw",
-            "left_info": f"{ns}/left/camera_info", "right_info": f"{ns}/right/camera_info",
-            "ground_truth": f"{ns}/ground_truth/points"}
-
-
-def count_bag_frames(path: str | Path, namespace: str = "/tactile") -> int:
-    """Number of left images in a bag (for progress bars)."""
-    from tactile_sl_camera.bag_io import BagReader
-
-    reader = BagReader(path)
-    topic = bag_topics(namespace)["left_image"]
-    return reader.topics[topic].message_count if topic in reader.topics else 0
-
-
-def bag_frames(path: str | Path, namespace: str = "/tactile",
-               ground_truth: bool = True) -> Any:
-    """Stereo frames of a bag, grouped by exact header stamp, in stamp order.
-
-    Messages of one frame may come in any order; a frame is complete once both images are
-    there.  CameraInfo may be sent less often than images: the latest one of each side is
-    used then.  Raises ``BagError`` for unreadable bags or missing image topics.
-    """
-    from tactile_sl_camera.bag_io import BagReader, header_stamp_of_cdr
-
-    reader = BagReader(path)
-    topics = bag_topics(namespace)
-    reader.require_topics([topics["left_image"], topics["right_image"],
-                           topics["left_info"], topics["right_info"]])
-    wanted = [topics[k] for k in ("left_image", "right_image", "left_info", "right_info")]
-    if ground_truth and topics["ground_truth"] in reader.topics:
-        wanted.append(topics["ground_truth"])
-    part_of = {v: k for k, v in topics.items()}
-    pending: dict[tuple[int, int], dict[str, Any]] = {}
-    latest_info: dict[str, Any] = {}
-
-    def flush(up_to: tuple[int, int] | None) -> Any:
-        for stamp in sorted(pending):
-            if up_to is not None and stamp >= up_to:
-                break
-            parts = pending.pop(stamp)
-            for side in ("left_info", "right_info"):
-                if side in parts:
-                    latest_info[side] = parts[side]
-            if "left_image" in parts and "right_image" in parts:
-                left_info = parts.get("left_info", latest_info.get("left_info"))
-                right_info = parts.get("right_info", latest_info.get("right_info"))
-                yield BagFrame(stamp, parts["left_image"], parts["right_image"], left_info,
-                               right_info, parts.get("ground_truth"))
-
-    for raw, msg in reader.messages(wanted):
-        stamp = tuple(int(x) for x in header_stamp_of_cdr(raw.data))
-        # log time = stamp in our bags, but be tolerant: only flush frames well behind.
-        yield from flush(_minus(stamp, 1))
-        pending.setdefault(stamp, {})[part_of[raw.topic]] = msg
-    yield from flush(None)
-
-
-def _minus(stamp: tuple[int, ...], seconds: int) -> tuple[int, int]:
-    return (stamp[0] - seconds, stamp[1])
-
-
-# ---------------------------------------------------------------------- stereo pairing
-
-
-@dataclass
-class SyncEvent:
-    """What :class:`StereoSync` decided for an incoming message."""
-
-    pairs: list[tuple[int, Any, Any]] = field(default_factory=list)   # (stamp_ns, left, right)
-    dropped: list[tuple[str, int, str]] = field(default_factory=list)  # (side, stamp, reason)
-    reset: bool = False            # time jumped back by more than max_age: state cleared
-
-
-class StereoSync:
-    """Pairs left/right messages by header stamp: exact stamps first, then within a slop.
-
-    Unpaired messages wait in bounded per-side queues; a message older than the newest
-    paired frame, or pushed out of a full queue, or older than ``max_age_ns`` behind the
-    newest message seen, is dropped (stale frames are never queued without bound).  A stamp
-    more than ``max_age_ns`` *before* the last paired frame means time jumped back (a bag
-    played again): the state is reset rather than every later frame dropped as stale.
-    """
-
-    def __init__(self, slop_ns: int = 0, queue_size: int = 5, max_age_ns: int = 500_000_000):
-        self.slop_ns = int(slop_ns)
-        self.queue_size = max(1, int(queue_size))
-        self.max_age_ns = int(max_age_ns)
-        self.pending: dict[str, dict[int, Any]] = {"left": {}, "right": {}}
-        self.last_paired_ns: int | None = None
-        self.newest_ns: int | None = None
-
-    def add(self, side: str, stamp_ns: int, item: Any) -> SyncEvent:
-        """Offer one message; returns the pairs completed and the messages dropped."""
-        ev = SyncEvent()
-        other = "right" if side == "left" else "left"
-        if self.last_paired_ns is not None and stamp_ns < self.last_paired_ns - self.max_age_ns:
-            # Time jumped back by more than max_age (a bag played again, a looping replay,
-            # a restarted camera clock): start over instead of dropping everything.
-            for s in ("left", "right"):
-                for old in self.pending[s]:
-                    ev.dropped.append((s, old, "time jumped back (sync reset)"))
-                self.pending[s].clear()
-            self.last_paired_ns = None
-            self.newest_ns = None
-            ev.reset = True
-        if self.last_paired_ns is not None and stamp_ns <= self.last_paired_ns:
-            ev.dropped.append((side, stamp_ns, "stale (not newer than the last frame)"))
-            return ev
-        self.newest_ns = stamp_ns if self.newest_ns is None else max(self.newest_ns, stamp_ns)
-        mine, theirs = self.pending[side], self.pending[other]
-        partner: int | None = stamp_ns if stamp_ns in theirs else None
-        if partner is None and self.slop_ns > 0 and theirs:
-            cand = min(theirs, key=lambda s: abs(s - stamp_ns))
-            if abs(cand - stamp_ns) <= self.slop_ns and cand not in mine:
-                partner = cand
-        if partner is not None:
-            other_item = theirs.pop(partner)
-            stamp = stamp_ns if side == "left" else partner   # the left image's stamp
-            left, right = (item, other_item) if side == "left" else (other_item, item)
-            ev.pairs.append((stamp, left, right))
-            self.last_paired_ns = max(stamp_ns, partner)
-            for s in ("left", "right"):                          # older ones are now stale
-                for old in [t for t in self.pending[s] if t <= self.last_paired_ns]:
-                    del self.pending[s][old]
-                    ev.dropped.append((s, old, "no stereo partner (unsynchronised)"))
-            return ev
-        mine[stamp_ns] = item
-        while len(mine) > self.queue_size:
-            old = min(mine)
-            del mine[old]
-            ev.dropped.append((side, old, "no stereo partner before the queue filled"))
-        for s in ("left", "right"):
-            for old in [t for t in self.pending[s] if t < self.newest_ns - self.max_age_ns]:
-                del self.pending[s][old]
-                ev.dropped.append((s, old, "no stereo partner in time (unsynchronised)"))
-        return ev
-
-
-# ---------------------------------------------------------------------- SymbolArray
-
-
-def _array(value: Any, dtype: Any) -> np.ndarray:
-    if isinstance(value, np.ndarray):
-        return value.astype(dtype, copy=False).reshape(-1)
-    try:
-        return np.frombuffer(memoryview(value), dtype=dtype).copy()
-    except (TypeError, ValueError):
-        return np.asarray(list(value), dtype=dtype)
-
-
-def glyphs_from_symbol_array(msg: Any) -> Glyphs:
-    """Glyphs of a tactile_sl_msgs/SymbolArray (rclpy or bag-decoded), checked."""
-    u = _array(msg.u, np.float32)
-    n = len(u)
-    fields = {"v": np.float32, "area": np.float32, "label": np.uint8,
-              "confidence": np.float32, "row": np.int32, "col": np.int32}
-    arrays = {}
-    for name, dtype in fields.items():
-        arr = _array(getattr(msg, name), dtype)
-        if len(arr) not in (n, 0) or (name in ("v", "label") and len(arr) != n):
-            raise PipelineInputError(f"SymbolArray field {name!r} has {len(arr)} values but "
-                                     f"there are {n} glyphs")
-        arrays[name] = arr if len(arr) == n else None
-    ps = int(msg.patch_size)
-    patches = None
-    if ps > 0:
-        raw = _array(msg.patches, np.uint8)
-        if len(raw) == n * ps * ps:
-            patches = raw.reshape(n, ps, ps)
-    return Glyphs(u, arrays["v"], arrays["label"], arrays["confidence"], float(msg.spacing_px),
-                  int(msg.image_width), int(msg.image_height), arrays["area"], patches,
-                  arrays["row"], arrays["col"])
