@@ -12,10 +12,11 @@ import time
 from typing import Any
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from tactile_sl_camera.nodes.runner import run_node
 
 from ..sim.artwork import ArtworkError
 from ..sim.scenes import SceneError, load_scenes, parse_scene
@@ -136,22 +137,8 @@ class SimCameraNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    """Run the node until shutdown."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SimCameraNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (SceneError, ArtworkError, ValueError) as exc:
-        print(f"sim_camera: {exc}", flush=True)
-        raise SystemExit(2) from exc
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    """Entry point of the ``sim_camera`` executable."""
+    run_node(SimCameraNode, "sim_camera", (SceneError, ArtworkError, ValueError, OSError), args)
 
 
 if __name__ == "__main__":

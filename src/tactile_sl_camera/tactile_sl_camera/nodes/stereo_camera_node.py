@@ -13,10 +13,11 @@ import time
 
 import numpy as np
 import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
+
+from tactile_sl_camera.nodes.runner import run_node
 
 from ..camera_info import (
     CameraCalibration,
@@ -146,22 +147,8 @@ class StereoCameraNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    """Run the node until shutdown."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = StereoCameraNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as exc:  # bad parameters: say so, exit non-zero
-        print(f"stereo_camera: {exc}", flush=True)
-        raise SystemExit(2) from exc
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    """Entry point of the ``stereo_camera`` executable."""
+    run_node(StereoCameraNode, "stereo_camera", (ValueError, OSError), args)
 
 
 if __name__ == "__main__":

@@ -21,15 +21,14 @@ import time
 from typing import Any
 
 import numpy as np
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 
 from tactile_sl_camera.clouds import cloud_fields
 from tactile_sl_camera.images import ImageFormatError, to_gray
+from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.pipeline import (
     Glyphs,
     PatternSpec,
@@ -167,6 +166,11 @@ class DecoderNode(Node):
             f"decoder ready: input={self.input_mode}, pattern {pattern.array.shape[0]}x"
             f"{pattern.array.shape[1]} (window {pattern.window[0]}x{pattern.window[1]}, "
             f"h={pattern.min_hamming}), mirrored={params.decode.mirrored}")
+
+    def destroy_node(self) -> None:
+        """Stop the pipeline's worker threads before the node goes."""
+        self.pipeline.close()
+        super().destroy_node()
 
     def _extraction_params(self) -> Any:
         """One ``extraction.<field>`` parameter per ExtractionParams field.
@@ -309,23 +313,8 @@ def make_symbol_array(g: Glyphs, header: Any, patches: bool = False) -> Any:
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = DecoderNode()
-        rclpy.spin(node)
-    except (ValueError, OSError, RuntimeError) as exc:
-        logger = node.get_logger() if node is not None else rclpy.logging.get_logger("decoder")
-        logger.fatal(str(exc))
-        raise SystemExit(1) from None
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.pipeline.close()
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.try_shutdown()
+    """Entry point of the ``decoder`` executable."""
+    run_node(DecoderNode, "decoder", args=args)
 
 
 if __name__ == "__main__":

@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import time
 
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.classifier import PATCH, Classifier
 from tactile_sl_decoder.symbol_array import SymbolArrayError, fill_message, from_message
 from tactile_sl_msgs.msg import SymbolArray
@@ -76,23 +75,8 @@ class SymbolClassifierNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    """Entry point of the ``symbol_classifier`` executable."""
-    rclpy.init(args=args)
-    try:
-        node = SymbolClassifierNode()
-    except Exception as exc:  # bad weights path / file: one clear line, not a traceback
-        print(f"symbol_classifier: {exc}")
-        if rclpy.ok():
-            rclpy.shutdown()
-        raise SystemExit(1) from None
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    """Entry point of the ``symbol_classifier`` executable (bad weights: one clear line)."""
+    run_node(SymbolClassifierNode, "symbol_classifier", (Exception,), args)
 
 
 if __name__ == "__main__":

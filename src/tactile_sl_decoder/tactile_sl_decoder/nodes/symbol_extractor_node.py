@@ -14,14 +14,13 @@ import time
 from typing import Any
 
 import cv2
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
 from tactile_sl_camera.images import ImageFormatError, to_gray
+from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.extraction import ExtractionParams, extract_symbols
 from tactile_sl_decoder.symbol_array import Symbols, fill_message
 from tactile_sl_msgs.msg import SymbolArray
@@ -100,16 +99,7 @@ class SymbolExtractorNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Entry point of the ``symbol_extractor`` executable."""
-    rclpy.init(args=args)
-    node = SymbolExtractorNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    run_node(SymbolExtractorNode, "symbol_extractor", args=args)
 
 
 if __name__ == "__main__":
