@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import pathlib
+import time
 
 import numpy as np
 import pytest
@@ -118,10 +119,11 @@ def test_restamp_keeps_stereo_pairs_identical(tmp_path, domain_id):
     assert code == 0
     left = [s for s, _ in received["left/image_raw"]]
     right = [s for s, _ in received["right/image_raw"]]
-    original = [s for s, _ in bag_images(bag)["left/image_raw"]]
     assert left == right and len(left) == 4
-    assert left[0] != original[0]
-    assert np.diff(left).tolist() == np.diff(original).tolist()
+    # stamped when published (now), increasing, about 1/rate apart (recorded: 1 s apart)
+    assert abs(left[0] / 1e9 - time.time()) < 60
+    gaps = np.diff(left) / 1e9
+    assert (gaps > 0).all() and (gaps < 0.5).all(), gaps
     # pixels unchanged by restamping
     assert [d for _, d in received["left/image_raw"]] == [
         d for _, d in bag_images(bag)["left/image_raw"]]

@@ -103,7 +103,11 @@ def main() -> int:
                     args.domain_id, args.out / "decoder.log")
     replay = None
     try:
-        # The decoder subscribes to both images; wait for it before playing.
+        # Play once this listener is matched with the decoder's `points` publisher (the
+        # replay itself waits for the decoder's image subscriptions).
+        ready = time.monotonic() + 60
+        while listener.node.count_publishers("/tactile/points") < 1 and time.monotonic() < ready:
+            listener.spin()
         replay = start("tactile_sl_camera", "replay", [
             "-r", "__ns:=/tactile", "-p", f"bag:={bag}", "-p", "rate:=0.0",
             "-p", "reliability:=reliable", "-p", "depth:=5",

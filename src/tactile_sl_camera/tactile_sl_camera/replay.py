@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 from tactile_sl_camera.bag_io import (
     BagError,
@@ -60,8 +60,7 @@ class ReplayPlan:
 
     rate > 0 plays at ``rate`` times the recorded speed; rate == 0 plays as fast as the
     consumer of the iterator goes (the node adds subscriber pacing on top).
-    With ``restamp``, every header stamp is shifted by one offset per pass so the images of
-    one stereo frame keep identical stamps and the spacing between frames is preserved.
+    Stamps are left as recorded; :class:`Restamper` replaces them at publication time.
     """
 
     def __init__(self, bag_path: str | os.PathLike, topics: Iterable[str] = (),
@@ -96,22 +95,39 @@ class ReplayPlan:
     def message_count(self) -> int:
         return sum(self.reader.topics[t].message_count for t in self.bag_topics)
 
-    def items(self, loop_index: int = 0, restamp_base_ns: int | None = None
-              ) -> Iterator[ReplayItem]:
-        """One pass over the bag. ``restamp_base_ns``: new stamp of the first message."""
+    def items(self, loop_index: int = 0) -> Iterator[ReplayItem]:
+        """One pass over the bag, with each message's recorded header stamp."""
         start_ns: int | None = None
-        first_stamp_ns: int | None = None
         for raw in self.reader.raw_messages(self.bag_topics):
             if start_ns is None:
                 start_ns = raw.log_time_ns
             due = 0.0 if self.rate == 0 else (raw.log_time_ns - start_ns) / 1e9 / self.rate
-            data, stamp_ns = raw.data, raw.log_time_ns
+            stamp_ns = raw.log_time_ns
             if raw.schema_name in HEADER_FIRST_TYPES:
                 stamp_ns = stamp_to_ns(*header_stamp_of_cdr(raw.data))
-                if first_stamp_ns is None:
-                    first_stamp_ns = stamp_ns
-                if restamp_base_ns is not None:
-                    stamp_ns = restamp_base_ns + (stamp_ns - first_stamp_ns)
-                    data = restamp_cdr(raw.data, *ns_to_stamp(stamp_ns))
-            yield ReplayItem(self.outputs[raw.topic], raw.schema_name, data, due, stamp_ns,
+            yield ReplayItem(self.outputs[raw.topic], raw.schema_name, raw.data, due, stamp_ns,
                              loop_index)
+
+
+class Restamper:
+    """Stamps each stereo frame with the time it is published, as a live camera would.
+
+    Messages that share a recorded stamp (the images and camera_info of one stereo frame)
+    get one and the same new stamp, taken from ``clock_ns`` when the first of them goes out;
+    so pairing by exact stamps still works, and stamp-to-output latency is measurable at any
+    playback rate. Use one Restamper per pass over the bag.
+    """
+
+    def __init__(self, clock_ns: Callable[[], int]) -> None:
+        self.clock_ns = clock_ns
+        self._recorded: int | None = None
+        self._new = 0
+
+    def __call__(self, item: ReplayItem) -> tuple[bytes, int]:
+        """CDR bytes and stamp (ns) to publish for ``item``."""
+        if item.schema_name not in HEADER_FIRST_TYPES:
+            return item.data, item.stamp_ns
+        if item.stamp_ns != self._recorded:
+            self._recorded = item.stamp_ns
+            self._new = int(self.clock_ns())
+        return restamp_cdr(item.data, *ns_to_stamp(self._new)), self._new

@@ -4,7 +4,7 @@ import pytest
 
 from tactile_sl_camera.bag_io import BagError, BagWriter, header_stamp_of_cdr
 from tactile_sl_camera.images import image_fields
-from tactile_sl_camera.replay import ReplayPlan, relative_name
+from tactile_sl_camera.replay import ReplayPlan, Restamper, relative_name
 
 
 @pytest.fixture
@@ -42,12 +42,15 @@ def test_rate_scales_the_schedule(bag):
     assert all(item.due_s == 0 for item in ReplayPlan(bag, rate=0).items())
 
 
-def test_restamp_shifts_every_frame_by_one_offset(bag):
-    items = list(ReplayPlan(bag).items(restamp_base_ns=7 * 10**9))
-    stamps = [header_stamp_of_cdr(item.data) for item in items]
-    assert stamps == [(7, 0), (7, 0), (7, 100_000_000), (7, 100_000_000),
-                      (7, 200_000_000), (7, 200_000_000)]
-    assert [item.stamp_ns for item in items][::2] == [7 * 10**9 + k * 10**8 for k in range(3)]
+def test_restamper_stamps_each_frame_when_it_goes_out(bag):
+    clock = iter([7_000_000_000, 7_033_000_000, 7_066_000_000])
+    restamp = Restamper(lambda: next(clock))
+    out = [restamp(item) for item in ReplayPlan(bag, rate=3.0).items()]
+    stamps = [header_stamp_of_cdr(data) for data, _ in out]
+    # left and right of a frame share the new stamp; one clock reading per frame
+    assert stamps == [(7, 0), (7, 0), (7, 33_000_000), (7, 33_000_000),
+                      (7, 66_000_000), (7, 66_000_000)]
+    assert [ns for _, ns in out][::2] == [7_000_000_000, 7_033_000_000, 7_066_000_000]
 
 
 def test_requested_topic_must_exist(bag):

@@ -338,3 +338,26 @@ def test_symbols_input_gives_the_same_points_as_images(ros, tmp_path):
     assert set(online) == set(frames), proc.lines[-5:]
     for stamp in online:
         assert online[stamp] == offline[stamp]
+
+
+def test_images_before_camera_info_still_give_a_cloud(ros):
+    """Messages of one frame may arrive in any order (contract): the first frame's images
+    overtaking its CameraInfo must not cost the frame."""
+    ros.start()
+    pubs, clouds = _io(ros)
+    _wait_matched(ros, pubs)
+    msgs = _bag_messages(1)
+    img = {s: m for k, s, m in msgs if k == "image"}
+    info = {s: m for k, s, m in msgs if k == "info"}
+    stamp = (img["left"].header.stamp.sec, img["left"].header.stamp.nanosec)
+    for side in ("left", "right"):
+        pubs[("image", side)].publish(img[side])
+    ros.spin(0.3)
+    assert not clouds, "a cloud before any CameraInfo"
+    for side in ("left", "right"):
+        pubs[("info", side)].publish(info[side])
+    end = time.monotonic() + 10.0
+    while time.monotonic() < end and not clouds:
+        ros.spin(0.05)
+    assert [(c.header.stamp.sec, c.header.stamp.nanosec) for c in clouds] == [stamp]
+    assert clouds[0].width > 500

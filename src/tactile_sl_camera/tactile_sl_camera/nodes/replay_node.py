@@ -18,7 +18,7 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from tactile_sl_camera.bag_io import BagError, stamp_to_ns
-from tactile_sl_camera.replay import ReplayItem, ReplayPlan
+from tactile_sl_camera.replay import ReplayPlan, Restamper
 
 
 def message_class(schema_name: str) -> Any:
@@ -47,9 +47,11 @@ class ReplayNode(Node):
             "Playback speed: 1.0 = recorded rate, 2.0 = twice as fast, 0 = as fast as "
             "possible (combine with wait_for_topic to go as fast as a subscriber keeps up)."))
         self.declare_parameter("loop", False, _described("Start over at the end of the bag."))
+        self.declare_parameter("loops", 0, _described(
+            "With loop: number of passes over the bag, then stop (0 = forever)."))
         self.declare_parameter("restamp", False, _described(
-            "Shift header stamps so the first frame is stamped now; one shift per pass keeps "
-            "the left/right images of a frame identically stamped."))
+            "Stamp each stereo frame with the time it is published (all messages of a frame "
+            "get the same new stamp), as a live camera would."))
         self.declare_parameter("reliability", "best_effort", _described(
             "QoS reliability of the publishers: best_effort (sensor data) or reliable."))
         self.declare_parameter("depth", 5, _described("QoS history depth of the publishers."))
@@ -74,6 +76,7 @@ class ReplayNode(Node):
         self.plan = ReplayPlan(bag, [t for t in p("topics").value if t],
                                p("bag_namespace").value, float(p("rate").value))
         self.loop = bool(p("loop").value)
+        self.loops = int(p("loops").value)
         self.restamp = bool(p("restamp").value)
         self.exit_on_end = bool(p("exit_on_end").value)
         self.wait_timeout = float(p("wait_timeout").value)
@@ -141,10 +144,9 @@ class ReplayNode(Node):
                 self._wait_for_subscribers()
             loop_index = 0
             while rclpy.ok():
-                base = self.get_clock().now().nanoseconds if self.restamp else None
-                self._play_pass(loop_index, base)
+                self._play_pass(loop_index)
                 loop_index += 1
-                if not self.loop:
+                if not self.loop or (self.loops > 0 and loop_index >= self.loops):
                     break
             self.get_logger().info(f"finished: {self.published} messages published")
         except BagError as exc:
@@ -152,25 +154,25 @@ class ReplayNode(Node):
         finally:
             self.done.set()
 
-    def _play_pass(self, loop_index: int, restamp_base_ns: int | None) -> None:
+    def _play_pass(self, loop_index: int) -> None:
         start = time.monotonic()
-        frame_stamp: int | None = None
-        for item in self.plan.items(loop_index, restamp_base_ns):
-            if self.pacing and frame_stamp is not None and item.stamp_ns != frame_stamp:
-                self._wait_for_ack(frame_stamp)
+        restamper = Restamper(lambda: self.get_clock().now().nanoseconds) if self.restamp else None
+        recorded: int | None = None     # recorded stamp of the frame being published
+        published: int | None = None    # stamp it went out with
+        for item in self.plan.items(loop_index):
+            if self.pacing and recorded is not None and item.stamp_ns != recorded:
+                self._wait_for_ack(published)
             delay = start + item.due_s - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
             if not rclpy.ok():
                 return
-            self._publish(item)
-            frame_stamp = item.stamp_ns
-        if self.pacing and frame_stamp is not None:
-            self._wait_for_ack(frame_stamp)
-
-    def _publish(self, item: ReplayItem) -> None:
-        self.publishers_by_topic[item.topic].publish(item.data)
-        self.published += 1
+            data, stamp = restamper(item) if restamper else (item.data, item.stamp_ns)
+            self.publishers_by_topic[item.topic].publish(data)
+            self.published += 1
+            recorded, published = item.stamp_ns, stamp
+        if self.pacing and published is not None:
+            self._wait_for_ack(published)
 
 
 def main(args: list[str] | None = None) -> None:

@@ -134,6 +134,10 @@ class DecoderNode(Node):
         self.warn_period = float(gp("warn_period").value)
         self._last_warn: dict[str, float] = {}
         self.info: dict[str, Any] = {"left": None, "right": None}
+        # The newest stereo pair that arrived before any CameraInfo (messages of a frame may
+        # come in any order): processed when the calibration arrives, if still fresh.
+        self._waiting: tuple[float, Any, Any] | None = None
+        self._max_wait_s = float(gp("max_age").value)
         self.stats = {"frames": 0, "skipped": 0, "dropped": 0, "points": 0, "left": 0,
                       "right": 0}
         self._proc_ms: list[float] = []
@@ -204,6 +208,14 @@ class DecoderNode(Node):
 
     def _on_info(self, side: str, msg: CameraInfo) -> None:
         self.info[side] = msg
+        if self._waiting is not None and self._calibrated():
+            since, left, right = self._waiting
+            self._waiting = None
+            if time.monotonic() - since <= self._max_wait_s:
+                self._process(left, right)
+
+    def _calibrated(self) -> bool:
+        return self.info["left"] is not None and self.info["right"] is not None
 
     def _on_frame(self, side: str, msg: Any) -> None:
         self.stats[side] += 1
@@ -215,6 +227,11 @@ class DecoderNode(Node):
             self.stats["dropped"] += 1
             self.warn(f"drop-{reason}", f"dropped {s} frame {stamp / 1e9:.6f}: {reason}")
         for _, left, right in ev.pairs:
+            if not self._calibrated():
+                if self._waiting is not None:   # superseded: skipped, with the usual warning
+                    self._process(*self._waiting[1:])
+                self._waiting = (time.monotonic(), left, right)
+                continue
             self._process(left, right)
 
     def _process(self, left_msg: Any, right_msg: Any) -> None:

@@ -1,0 +1,101 @@
+"""Through the ROS graph: `replay` -> `decoder` at a fixed input rate; drops and latency.
+
+Both are the installed executables, run as separate processes (namespace /tactile,
+loopback DDS, private domain). The replay restamps every stereo frame with the time it is
+published, so latency = arrival time of the cloud here - its stamp. A frame is dropped if
+no cloud with its stamp arrives. Figures, not a pass/fail test.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import subprocess
+import sys
+import time
+
+import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import PointCloud2
+
+from tactile_sl_camera.bag_io import stamp_to_ns
+from tactile_sl_decoder.frames import count_bag_frames
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "tests"))
+from ros_harness import executable, ros_env, stop  # noqa: E402
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--bag", type=pathlib.Path, default=REPO / "bags" / "two_contacts.mcap")
+    parser.add_argument("--rate", type=float, default=3.0,
+                        help="replay rate multiplier (the bags are 10 Hz: 3.0 = 30 Hz)")
+    parser.add_argument("--loops", type=int, default=43, help="passes over the bag")
+    parser.add_argument("--domain-id", type=int, default=int(os.environ.get("BENCH_DOMAIN_ID", 29)))
+    parser.add_argument("--logs", type=pathlib.Path, default=REPO / "out" / "bench_graph")
+    args = parser.parse_args()
+    args.logs.mkdir(parents=True, exist_ok=True)
+    frames_per_pass = count_bag_frames(args.bag)
+    expected = frames_per_pass * args.loops
+
+    context = Context()
+    rclpy.init(context=context, domain_id=args.domain_id)
+    node = rclpy.create_node("bench_graph", namespace="/tactile", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    latency_ms: dict[int, float] = {}
+
+    def on_cloud(msg: PointCloud2) -> None:
+        stamp = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        latency_ms.setdefault(stamp, (time.time_ns() - stamp) / 1e6)
+
+    node.create_subscription(PointCloud2, "points", on_cloud,
+                             QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+    env = ros_env(args.domain_id)
+    procs = []
+    try:
+        procs.append(subprocess.Popen(
+            [str(executable("tactile_sl_decoder", "decoder")), "--ros-args", "-r",
+             "__ns:=/tactile", "-p", "publish_symbols:=false"],
+            env=env, stdout=open(args.logs / "decoder.log", "w"), stderr=subprocess.STDOUT))
+        # Play only once this listener is matched with the decoder's `points` publisher.
+        ready = time.monotonic() + 60
+        while node.count_publishers("/tactile/points") < 1 and time.monotonic() < ready:
+            executor.spin_once(timeout_sec=0.05)
+        replay = subprocess.Popen(
+            [str(executable("tactile_sl_camera", "replay")), "--ros-args", "-r",
+             "__ns:=/tactile", "-p", f"bag:={args.bag}", "-p", f"rate:={args.rate}",
+             "-p", "loop:=true", "-p", f"loops:={args.loops}", "-p", "restamp:=true",
+             "-p", "wait_for_subscribers:=1", "-p", "wait_for_subscribers_timeout:=60.0"],
+            env=env, stdout=open(args.logs / "replay.log", "w"), stderr=subprocess.STDOUT)
+        procs.append(replay)
+        deadline = time.monotonic() + 60 + expected / (10.0 * args.rate) * 3
+        while replay.poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.02)
+    finally:
+        for proc in reversed(procs):
+            stop(proc)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    lat = np.array(list(latency_ms.values()))
+    print(f"replay -> decoder over loopback DDS: {expected} stereo frames of {args.bag.name} at "
+          f"{10.0 * args.rate:.0f} Hz, Fast DDS profile "
+          f"{os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE') or 'none'}, load average "
+          f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+    print(f"clouds received {len(lat)}, dropped {expected - len(lat)}")
+    if len(lat):
+        print(f"latency image stamp -> cloud received: median {np.median(lat):.1f} ms, "
+              f"p99 {np.percentile(lat, 99):.1f} ms, max {lat.max():.1f} ms")
+    return 0 if len(lat) == expected else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
