@@ -23,44 +23,10 @@ from tactile_sl_decoder.pipeline import (
     glyphs_from_symbol_array,
 )
 
+from small_patterns import make_pattern
+
 REPO = pathlib.Path(__file__).resolve().parents[3]
 ARTWORK = REPO / "src" / "tactile_sl_camera" / "artwork" / "pattern.png.yaml"
-
-
-def make_pattern(rows=12, cols=14, seed=0, k=3, h=3):
-    """Small valid M-array (3x3 windows, min Hamming h) by randomised backtracking."""
-    rng = np.random.default_rng(seed)
-    n = rows * cols
-    a = np.zeros((rows, cols), int)
-    order = [rng.permutation(k) for _ in range(n)]
-    choice = [0] * n
-    wins = np.zeros(((rows - 2) * (cols - 2), 9), int)
-    nw = [0] * (n + 1)
-    i = steps = 0
-    while i < n:
-        steps += 1
-        assert steps < 200000
-        if choice[i] >= k:
-            choice[i] = 0
-            order[i] = rng.permutation(k)
-            i -= 1
-            choice[i] += 1
-            continue
-        r, c = divmod(i, cols)
-        a[r, c] = order[i][choice[i]]
-        m = nw[i]
-        if r >= 2 and c >= 2:
-            w = a[r - 2:r + 1, c - 2:c + 1].reshape(-1)
-            if m and (wins[:m] != w).sum(1).min() < h:
-                choice[i] += 1
-                continue
-            wins[m] = w
-            m += 1
-        nw[i + 1] = m
-        i += 1
-        if i < n:
-            choice[i] = 0
-    return a.astype(np.uint8)
 
 
 PATTERN = PatternSpec(make_pattern(), (3, 3), 3, 3, 0.0005)
