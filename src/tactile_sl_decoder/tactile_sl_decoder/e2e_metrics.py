@@ -30,18 +30,13 @@ from scipy.spatial import cKDTree
 from tactile_sl_camera.clouds import cloud_to_arrays
 
 
-@dataclass
-class FrameMetrics:
-    """Figures of one stereo frame."""
+class _Rates:
+    """Coverage and wrong-cell rate from the counts (frame or pooled over a bag)."""
 
-    stamp_ns: int
     visible: int
     points: int
     correct: int
     wrong: int
-    extra: int
-    errors_m: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
-    timings_ms: dict[str, float] = field(default_factory=dict)
 
     @property
     def coverage(self) -> float:
@@ -53,6 +48,20 @@ class FrameMetrics:
         """Share of output points at a wrong cell."""
         return self.wrong / self.points if self.points else 0.0
 
+
+@dataclass
+class FrameMetrics(_Rates):
+    """Figures of one stereo frame."""
+
+    stamp_ns: int
+    visible: int
+    points: int
+    correct: int
+    wrong: int
+    extra: int
+    errors_m: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
     def summary(self) -> dict[str, Any]:
         """Plain dict (JSON-friendly) of the frame's figures."""
         return {"stamp_ns": self.stamp_ns, "visible": self.visible, "points": self.points,
@@ -62,7 +71,7 @@ class FrameMetrics:
 
 
 @dataclass
-class BagMetrics:
+class BagMetrics(_Rates):
     """Figures pooled over the frames of one bag."""
 
     name: str
@@ -79,16 +88,6 @@ class BagMetrics:
     max_m: float
     coverage_min: float
     timings_ms: dict[str, float] = field(default_factory=dict)
-
-    @property
-    def coverage(self) -> float:
-        """Pooled coverage over all frames."""
-        return self.correct / self.visible if self.visible else float("nan")
-
-    @property
-    def wrong_rate(self) -> float:
-        """Pooled wrong-cell rate over all output points."""
-        return self.wrong / self.points if self.points else 0.0
 
     def summary(self) -> dict[str, Any]:
         """Plain dict (JSON-friendly) of the bag's figures."""
