@@ -54,8 +54,22 @@ def test_chained_stage_nodes_equal_offline_replay(tmp_path, domain_id, repo):
             "-r", "__ns:=/tactile", "-p", "input:=symbols",
             "-r", "left/symbols:=left/labelled_symbols",
             "-r", "right/symbols:=right/labelled_symbols"], tmp_path / "decoder.log"))
+        # Play only once every hop of the chain has its publisher and subscriber (messages
+        # sent before two endpoints match are lost: volatile QoS).
+        hops = [f"/tactile/{side}/{topic}" for side in ("left", "right")
+                for topic in ("symbols", "labelled_symbols")]
+
+        def connected() -> bool:
+            return (node.count_publishers("/tactile/points") >= 1
+                    and all(node.count_publishers(t) >= 1 and node.count_subscribers(t) >= 1
+                            for t in hops))
+
         deadline = time.monotonic() + 60
-        while node.count_publishers("/tactile/points") < 1 and time.monotonic() < deadline:
+        while not connected() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert connected(), "the stage nodes did not connect within 60 s"
+        settle = time.monotonic() + 1.0   # let the remote endpoints match each other too
+        while time.monotonic() < settle:
             executor.spin_once(timeout_sec=0.05)
         # Paced by `points`, so no stage can be overrun; reliable so nothing is lost.
         replay = start_node("tactile_sl_camera", "replay", domain_id, [

@@ -56,7 +56,7 @@ class ReplayNode(Node):
             "QoS reliability of the publishers: best_effort (sensor data) or reliable."))
         self.declare_parameter("depth", 5, _described("QoS history depth of the publishers."))
         self.declare_parameter("wait_for_subscribers", 0, _described(
-            "Before playing, wait until every Image topic has at least this many subscribers."))
+            "Before playing, wait until every played topic has at least this many subscribers."))
         self.declare_parameter("wait_for_subscribers_timeout", 10.0, _described(
             "Seconds to wait for subscribers before playing anyway."))
         self.declare_parameter("wait_for_topic", "", _described(
@@ -118,16 +118,16 @@ class ReplayNode(Node):
             self._ack.notify_all()
 
     def _wait_for_subscribers(self) -> None:
-        image_topics = [name for bag_topic, name in self.plan.outputs.items()
-                        if self.plan.types[bag_topic] == "sensor_msgs/msg/Image"]
         deadline = time.monotonic() + self.subscribers_timeout
         while rclpy.ok() and time.monotonic() < deadline:
-            if all(self.publishers_by_topic[t].get_subscription_count() >= self.min_subscribers
-                   for t in image_topics):
+            if all(pub.get_subscription_count() >= self.min_subscribers
+                   for pub in self.publishers_by_topic.values()):
                 return
             time.sleep(0.02)
+        lacking = [name for name, pub in self.publishers_by_topic.items()
+                   if pub.get_subscription_count() < self.min_subscribers]
         self.get_logger().warning(
-            f"fewer than {self.min_subscribers} subscriber(s) after "
+            f"fewer than {self.min_subscribers} subscriber(s) on {', '.join(lacking)} after "
             f"{self.subscribers_timeout:.1f} s; playing anyway")
 
     def _wait_for_ack(self, stamp_ns: int) -> None:

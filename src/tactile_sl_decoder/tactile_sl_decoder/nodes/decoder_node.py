@@ -213,6 +213,11 @@ class DecoderNode(Node):
             self._waiting = None
             if time.monotonic() - since <= self._max_wait_s:
                 self._process(left, right)
+            else:
+                self.stats["skipped"] += 1
+                stamp = left.header.stamp
+                self.warn("info-late", f"frame {stamp.sec}.{stamp.nanosec:09d} skipped: its "
+                          f"CameraInfo came more than max_age ({self._max_wait_s} s) after it")
 
     def _calibrated(self) -> bool:
         return self.info["left"] is not None and self.info["right"] is not None
