@@ -1,6 +1,4 @@
 """Stereo calibration on simulator-rendered checkerboards with known ground truth."""
-import argparse
-
 import numpy as np
 import pytest
 
@@ -11,8 +9,6 @@ from tactile_sl_camera.calibration import (
     iter_bag_pairs,
     simulated_board_views,
 )
-from tactile_sl_camera.camera_info import load_camera_info_yaml
-from tactile_sl_camera.cli import calibrate_cmd
 from tactile_sl_camera.images import image_fields
 from tactile_sl_camera.sim.artwork import Artwork
 from tactile_sl_camera.sim.render import Renderer
@@ -30,13 +26,6 @@ def renderer():
 @pytest.fixture(scope="module")
 def views(renderer):
     return simulated_board_views(renderer, PATTERN, SQUARE, views=12, seed=1)
-
-
-def _cli(*argv):
-    parser = argparse.ArgumentParser()
-    calibrate_cmd.register(parser.add_subparsers())
-    args = parser.parse_args(["calibrate", *argv])
-    return args.func(args)
 
 
 def test_calibration_recovers_the_true_optics(renderer, views):
@@ -58,21 +47,8 @@ def test_calibration_recovers_the_true_optics(renderer, views):
                                                                          rel=1e-6)
 
 
-def test_cli_on_a_folder_writes_loadable_camera_info(tmp_path, views):
-    import cv2
-
-    for i, (left, right) in enumerate(views):
-        cv2.imwrite(str(tmp_path / f"left_{i:03d}.png"), left)
-        cv2.imwrite(str(tmp_path / f"right_{i:03d}.png"), right)
-    out = tmp_path / "calib"
-    assert _cli("--folder", str(tmp_path), "--pattern", "9x6", "--square", "0.001",
-                "-o", str(out)) == 0
-    left = load_camera_info_yaml(out / "left.yaml")
-    right = load_camera_info_yaml(out / "right.yaml")
-    assert left.width == 640 and right.height == 480
-    assert -right.P[0, 3] / right.P[0, 0] == pytest.approx(0.004, rel=0.01)
-    # the wrong pattern size finds no board: a clear failure, not a crash
-    assert _cli("--folder", str(tmp_path), "--pattern", "7x7", "-o", str(out)) == 1
+# The `tactile-sl calibrate` CLI (checkerboard mode included) is tested in
+# src/tactile_sl_decoder/test/test_pattern_calibration.py, where the command now lives.
 
 
 def test_bag_input_pairs_by_stamp(tmp_path, views):

@@ -15,7 +15,7 @@ from typing import Sequence
 SUBCOMMAND_MODULES: tuple[str, ...] = (
     "tactile_sl_decoder.cli.pattern_cmd",
     "tactile_sl_camera.cli.synth_cmd",
-    "tactile_sl_camera.cli.calibrate_cmd",
+    "tactile_sl_decoder.cli.calibrate_cmd",
     "tactile_sl_decoder.cli.train_cmd",
     "tactile_sl_decoder.cli.evaluate_cmd",
     "tactile_sl_decoder.cli.replay_cmd",
