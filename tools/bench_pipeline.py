@@ -45,6 +45,9 @@ FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
     <transport_descriptor>
       <transport_id>udp</transport_id>
       <type>UDPv4</type>
+      <interfaceWhiteList>
+        <address>127.0.0.1</address>
+      </interfaceWhiteList>
     </transport_descriptor>
   </transport_descriptors>
   <participant profile_name="default_participant" is_default_profile="true">
@@ -178,8 +181,9 @@ def through_ros(args: argparse.Namespace) -> int:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     if args.shm_segment_mb > 0:
         # Fast DDS's default 512 KB shared-memory segment holds one 640x480 image: the left
-        # image of a frame is recycled when the right one is written right after it.
-        profile = pathlib.Path(tempfile.mkdtemp()) / "fastdds.xml"
+        # image of a frame is recycled when the right one is written right after it. UDP on
+        # loopback only, like config/fastdds_loopback.xml.
+        profile = pathlib.Path(tempfile.mkdtemp()) / "fastdds_loopback.xml"
         profile.write_text(FASTDDS_PROFILE.format(size=int(args.shm_segment_mb * 2**20)))
         env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)
         os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(profile)   # this process too

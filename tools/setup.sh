@@ -20,6 +20,8 @@ missing=()
 command -v cmake >/dev/null 2>&1 || missing+=(cmake)
 command -v c++ >/dev/null 2>&1 || missing+=(g++)
 command -v make >/dev/null 2>&1 || missing+=(make)
+# tests/test_robot_network.py builds two network namespaces with `ip`.
+command -v ip >/dev/null 2>&1 || missing+=(iproute2)
 "$PY" -c 'import sysconfig, os, sys; sys.exit(not os.path.exists(os.path.join(sysconfig.get_paths()["include"], "Python.h")))' \
   || missing+=(python3-dev)
 "$PY" -c 'import ensurepip' >/dev/null 2>&1 || missing+=(python3-venv)
