@@ -1,8 +1,11 @@
-"""The contract's PointCloud2 layout (x, y, z FLOAT32 metres; row, col INT32), without rclpy.
+"""The contract's PointCloud2 layouts, without rclpy.
 
-One packed record per glyph cell: 20 bytes, little endian, unorganised (height 1), dense.
-``cloud_fields`` gives the message fields as a dict (for bags and for filling rclpy
-messages); ``cloud_to_arrays`` reads any PointCloud2 that has these fields back.
+Points (x, y, z FLOAT32 metres; row, col INT32): one packed record per glyph cell, 20 bytes,
+little endian, unorganised (height 1), dense. The touch ``field`` (pad frame): x, y, z
+(current position), dx, dy, dz (displacement from the reference) FLOAT32, row, col INT32, and
+optionally fx, fy, fz FLOAT32 (N): 32 or 44 bytes. ``cloud_fields`` gives the message fields
+as a dict (for bags and for filling rclpy messages); ``cloud_to_arrays`` reads any
+PointCloud2 that has the wanted fields back.
 """
 from __future__ import annotations
 
@@ -23,6 +26,10 @@ POINT_FIELDS = [
     {"name": "col", "offset": 16, "datatype": INT32, "count": 1},
 ]
 _NUMPY_OF_DATATYPE = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+_DATATYPE_OF_NUMPY = {v: k for k, v in _NUMPY_OF_DATATYPE.items()}
+FIELD_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("dx", "<f4"), ("dy", "<f4"),
+                        ("dz", "<f4"), ("row", "<i4"), ("col", "<i4")])
+FIELD_FORCE_DTYPE = np.dtype(FIELD_DTYPE.descr + [("fx", "<f4"), ("fy", "<f4"), ("fz", "<f4")])
 
 
 class CloudFormatError(ValueError):
@@ -46,32 +53,79 @@ def pack_points(xyz: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarr
     return points
 
 
+def pack_field(xyz: np.ndarray, dxyz: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+               force: np.ndarray | None = None) -> np.ndarray:
+    """Structured array of the touch ``field`` cloud; ``force`` (N, 3) N appends fx, fy, fz.
+
+    Same checks as :func:`pack_points` (finite, one point per cell, equal lengths).
+    """
+    points = pack_points(xyz, rows, cols)
+    dxyz = np.asarray(dxyz, dtype=np.float64).reshape(-1, 3)
+    if len(dxyz) != len(points):
+        raise CloudFormatError("xyz and dxyz differ in length")
+    if not np.isfinite(dxyz).all():
+        raise CloudFormatError("non-finite displacements (the cloud must be dense)")
+    out = np.empty(len(points), dtype=FIELD_DTYPE if force is None else FIELD_FORCE_DTYPE)
+    for name in POINT_DTYPE.names:
+        out[name] = points[name]
+    out["dx"], out["dy"], out["dz"] = dxyz[:, 0], dxyz[:, 1], dxyz[:, 2]
+    if force is not None:
+        force = np.asarray(force, dtype=np.float64).reshape(-1, 3)
+        if len(force) != len(points):
+            raise CloudFormatError("xyz and force differ in length")
+        if not np.isfinite(force).all():
+            raise CloudFormatError("non-finite forces (the cloud must be dense)")
+        out["fx"], out["fy"], out["fz"] = force[:, 0], force[:, 1], force[:, 2]
+    return out
+
+
+def _point_fields(dtype: np.dtype) -> list[dict[str, Any]]:
+    """PointField dicts of a packed little-endian structured dtype (one value per field)."""
+    out = []
+    for name in dtype.names:
+        sub, offset = dtype.fields[name][:2]
+        code = sub.str[1:]
+        if sub.byteorder == ">" or code not in _DATATYPE_OF_NUMPY:
+            raise CloudFormatError(f"field {name!r} has no PointField type ({sub})")
+        out.append({"name": name, "offset": int(offset), "datatype": _DATATYPE_OF_NUMPY[code],
+                    "count": 1})
+    return out
+
+
 def cloud_fields(points: np.ndarray, stamp: tuple[int, int], frame_id: str) -> dict[str, Any]:
-    """PointCloud2 fields (as a dict) for packed points, stamped exactly (sec, nanosec)."""
-    points = np.ascontiguousarray(points, dtype=POINT_DTYPE)
+    """PointCloud2 fields (as a dict) for packed points or a packed field, stamped exactly."""
+    if np.asarray(points).dtype.names in (FIELD_DTYPE.names, FIELD_FORCE_DTYPE.names):
+        points = np.ascontiguousarray(points)
+        fields = _point_fields(points.dtype)
+    else:
+        points = np.ascontiguousarray(points, dtype=POINT_DTYPE)
+        fields = [dict(f) for f in POINT_FIELDS]
     return {
         "header": {"stamp": {"sec": int(stamp[0]), "nanosec": int(stamp[1])},
                    "frame_id": frame_id},
         "height": 1,
         "width": len(points),
-        "fields": [dict(f) for f in POINT_FIELDS],
+        "fields": fields,
         "is_bigendian": False,
-        "point_step": POINT_DTYPE.itemsize,
-        "row_step": POINT_DTYPE.itemsize * len(points),
+        "point_step": points.dtype.itemsize,
+        "row_step": points.dtype.itemsize * len(points),
         "data": points.tobytes(),
         "is_dense": True,
     }
 
 
-def cloud_to_arrays(msg: Any) -> np.ndarray:
-    """Structured (x, y, z, row, col) array from a PointCloud2 (rclpy or bag-decoded)."""
+def cloud_to_arrays(msg: Any, dtype: np.dtype = POINT_DTYPE) -> np.ndarray:
+    """Structured array with ``dtype``'s fields (default x, y, z, row, col) from a PointCloud2.
+
+    Works on rclpy and bag-decoded messages; ``FIELD_DTYPE`` reads a touch field.
+    """
     names = {}
     for field in msg.fields:
         name = field["name"] if isinstance(field, dict) else field.name
         offset = field["offset"] if isinstance(field, dict) else field.offset
         datatype = field["datatype"] if isinstance(field, dict) else field.datatype
         names[name] = (offset, datatype)
-    missing = [n for n in POINT_DTYPE.names if n not in names]
+    missing = [n for n in dtype.names if n not in names]
     if missing:
         raise CloudFormatError(f"PointCloud2 lacks field(s) {', '.join(missing)}")
     count = int(msg.width) * int(msg.height)
@@ -82,13 +136,12 @@ def cloud_to_arrays(msg: Any) -> np.ndarray:
     if raw.size < count * step:
         raise CloudFormatError(f"PointCloud2 data has {raw.size} bytes, expected {count * step}")
     endian = ">" if msg.is_bigendian else "<"
-    dtype = np.dtype({"names": list(POINT_DTYPE.names),
-                      "formats": [endian + _NUMPY_OF_DATATYPE[names[n][1]]
-                                  for n in POINT_DTYPE.names],
-                      "offsets": [names[n][0] for n in POINT_DTYPE.names],
-                      "itemsize": step})
-    view = np.frombuffer(raw[: count * step].tobytes(), dtype=dtype)
-    out = np.empty(count, dtype=POINT_DTYPE)
-    for name in POINT_DTYPE.names:
+    layout = np.dtype({"names": list(dtype.names),
+                       "formats": [endian + _NUMPY_OF_DATATYPE[names[n][1]] for n in dtype.names],
+                       "offsets": [names[n][0] for n in dtype.names],
+                       "itemsize": step})
+    view = np.frombuffer(raw[: count * step].tobytes(), dtype=layout)
+    out = np.empty(count, dtype=dtype)
+    for name in dtype.names:
         out[name] = view[name]
     return out

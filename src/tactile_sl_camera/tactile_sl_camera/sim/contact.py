@@ -27,6 +27,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from ..elasticity import surface_displacement
+from .loads import is_load, load_traction
+
 KINDS = ("sphere", "cylinder", "edge", "flat")
 
 
@@ -139,6 +142,7 @@ class FieldGrid:
     ny: int = 501
     data: np.ndarray = field(default=None)  # type: ignore[assignment]  # (ny, nx, 3) float64
     slope: np.ndarray = field(default=None)  # type: ignore[assignment]  # (ny, nx, 2) dw/dX, dw/dY
+    traction: np.ndarray | None = None  # (ny, nx, 3) Pa of the load contacts, None without
 
     def __post_init__(self) -> None:
         if self.data is None:
@@ -158,14 +162,24 @@ class FieldGrid:
         return self.y0 + self.spacing * np.arange(self.ny)
 
     @classmethod
-    def build(cls, contacts: list[Contact], pad: PadParams, **grid: float) -> "FieldGrid":
-        """Tabulate the superposed displacement of all contacts."""
+    def build(cls, contacts: list, pad: PadParams, **grid: float) -> "FieldGrid":
+        """Tabulate the superposed displacement of all contacts (indenters and loads)."""
         g = cls(**grid)
         xs, ys = g.xs, g.ys
         box = None
         idx = None  # union of the contacts' index boxes (iy0, iy1, ix0, ix1)
+        loads = [c for c in contacts if is_load(c)]
+        if loads:
+            elastomers = {c.elastomer for c in loads}
+            if len(elastomers) > 1:
+                raise ValueError("load contacts of one frame must share one elastomer")
+            g.traction = load_traction(loads, xs, ys, g.spacing)
+            if np.any(g.traction):
+                g.data += surface_displacement(elastomers.pop(), g.traction, g.spacing)
+                box = (xs[0], ys[0], xs[-1], ys[-1])
+                idx = (0, g.ny, 0, g.nx)
         for contact in contacts:
-            if contact.depth <= 0:
+            if is_load(contact) or contact.depth <= 0:
                 continue
             reach = contact.support(pad) + contact.half_length()
             ix0 = int(np.clip(np.floor((contact.x - reach - g.x0) / g.spacing), 0, g.nx))

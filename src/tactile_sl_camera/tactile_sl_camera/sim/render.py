@@ -24,6 +24,7 @@ import numpy as np
 
 from .artwork import Artwork
 from .contact import Contact, FieldGrid, PadParams
+from .loads import LoadContact, TouchTruth, is_load, touch_truth
 from .optics import Camera, StereoRig
 
 
@@ -79,6 +80,7 @@ class GroundTruth:
     px_left: np.ndarray  # (N, 2) exact distorted pixel positions
     px_right: np.ndarray
     visible: np.ndarray  # (N,) bool: visible in both images
+    touch: TouchTruth | None = None  # force, contact and displacement truth (load scenes)
 
     def visible_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(xyz, rows, cols) of the glyphs visible in both images."""
@@ -433,9 +435,23 @@ class Renderer:
 
     # ------------------------------------------------------------------ frames
 
-    def render(self, contacts: list[Contact], nuisances: Nuisances | None = None,
+    def touch_truth(self, contacts: list[Contact | LoadContact], fld: FieldGrid,
+                    truth: GroundTruth) -> TouchTruth:
+        """Force, contact and per-cell displacement truth of a frame (pad frame)."""
+        if self.mirrored:
+            raise ValueError("touch ground truth needs a non-mirrored view")
+        rows, cols, X, Y = self.cell_rest_positions()
+        v = truth.visible
+        traction = fld.traction if fld.traction is not None else np.zeros((fld.ny, fld.nx, 3))
+        return touch_truth(contacts, traction, fld.data[:, :, 2], fld.xs, fld.ys, fld.spacing,
+                           (X, Y), (rows[v], cols[v], truth.world[v], fld.sample(X[v], Y[v])))
+
+    def render(self, contacts: list[Contact | LoadContact], nuisances: Nuisances | None = None,
                seed: int = 0, frame_index: int = 0, color: bool = False) -> StereoFrame:
-        """Render one stereo frame and its ground truth (deterministic for seed, frame)."""
+        """Render one stereo frame and its ground truth (deterministic for seed, frame).
+
+        With load contacts the truth carries :attr:`GroundTruth.touch`.
+        """
         nz = nuisances or Nuisances()
         fld = self.build_field(contacts)
         rng = np.random.default_rng([int(seed), int(frame_index)])
@@ -444,7 +460,10 @@ class Renderer:
         exposure = max(exposure, 0.0)
         left = self.render_camera(0, fld, nz, rng, exposure, color)
         right = self.render_camera(1, fld, nz, rng, exposure, color)
-        return StereoFrame(left, right, self.ground_truth(fld, nz), fld)
+        truth = self.ground_truth(fld, nz)
+        if any(is_load(c) for c in contacts):
+            truth.touch = self.touch_truth(contacts, fld, truth)
+        return StereoFrame(left, right, truth, fld)
 
     def render_plane(self, index: int, R_board: np.ndarray, t_board: np.ndarray,
                      albedo_fn: Any, background: float = 0.45, noise_sigma: float = 0.5,

@@ -16,9 +16,19 @@ A scenes file has optional ``defaults`` (merged into every scene) and a list of 
 
 Scene keys: name, frames, fps, seed, encoding (mono8 | bgr8), start_time (seconds, stamps
 of frame 0), supersample, mirrored, rig (RigParams), pad (PadParams), nuisances (Nuisances),
-exposure_keyframes ([{frame, exposure}]), contacts. Indenter keys: kind (sphere, cylinder,
+exposure_keyframes ([{frame, exposure}]), elastomer ({youngs_modulus, poisson_ratio,
+thickness}: the pad under load contacts), contacts. Indenter keys: kind (sphere, cylinder,
 edge, flat), radius, length, angle_deg, fillet. Keyframe keys: frame, depth, x, y,
 shear [sx, sy], angle_deg.
+
+Load contacts (known tractions, see ``loads.py``): indenter ``{kind: load, radius, profile:
+hertz | uniform}``, keyframe keys frame, x, y, force [fx, fy, fz] (N, pad frame, fz <= 0
+presses), torque (N m about the disc's normal)::
+
+      - indenter: {kind: load, radius: 0.004, profile: hertz}
+        keyframes:
+          - {frame: 0, x: 0.0, y: 0.0, force: [0.0, 0.0, 0.0]}
+          - {frame: 2, force: [0.1, 0.0, -1.0], torque: 0.0005}
 """
 from __future__ import annotations
 
@@ -31,15 +41,20 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .contact import Contact, PadParams
+from ..elasticity import Elastomer
+from .contact import Contact, FieldGrid, PadParams
+from .loads import DEFAULT_ELASTOMER, PROFILES, LoadContact
 from .optics import RigParams
 from .render import Nuisances
 
 SCENE_KEYS = {"name", "frames", "fps", "seed", "encoding", "start_time", "supersample",
               "mirrored", "rig", "pad", "nuisances", "exposure_keyframes", "contacts",
-              "artwork", "description"}
+              "artwork", "description", "elastomer"}
 INDENTER_KEYS = {"kind", "radius", "length", "angle_deg", "fillet"}
 KEYFRAME_KEYS = {"frame", "depth", "x", "y", "shear", "angle_deg"}
+LOAD_KEYS = {"kind", "radius", "profile"}
+LOAD_KEYFRAME_KEYS = {"frame", "x", "y", "force", "torque"}
+ELASTOMER_KEYS = {"youngs_modulus", "poisson_ratio", "thickness"}
 DEFAULT_START_TIME = 1_700_000_000
 
 
@@ -71,14 +86,28 @@ class ContactTrack:
     indenter: dict[str, Any]
     keyframes: list[dict[str, Any]]
 
-    def at(self, frame: int) -> Contact:
-        """The indenter's state in a frame (linear interpolation between keyframes)."""
-        state: dict[str, Any] = {"depth": 0.0, "x": 0.0, "y": 0.0, "shear": (0.0, 0.0),
-                                 "angle_deg": float(self.indenter.get("angle_deg", 0.0))}
+    @property
+    def is_load(self) -> bool:
+        return self.indenter.get("kind") == "load"
+
+    def _state(self, frame: int) -> dict[str, Any]:
+        """Keyframe values in a frame: carried forward, linear in between."""
+        if self.is_load:
+            state: dict[str, Any] = {"x": 0.0, "y": 0.0, "force": (0.0, 0.0, 0.0),
+                                     "torque": 0.0}
+            vectors = {"force": 3}
+        else:
+            state = {"depth": 0.0, "x": 0.0, "y": 0.0, "shear": (0.0, 0.0),
+                     "angle_deg": float(self.indenter.get("angle_deg", 0.0))}
+            vectors = {"shear": 2}
         filled = []
         for kf in self.keyframes:  # carry values forward so every keyframe is complete
             state = {**state, **{k: v for k, v in kf.items() if k != "frame"}}
-            state["shear"] = tuple(float(s) for s in state["shear"])
+            for key, n in vectors.items():
+                vec = tuple(float(s) for s in state[key])
+                if len(vec) != n:
+                    raise ValueError(f"{key} needs {n} numbers, got {state[key]!r}")
+                state[key] = vec
             filled.append((int(kf["frame"]), dict(state)))
         s = filled[0][1]
         if frame >= filled[-1][0]:
@@ -88,9 +117,21 @@ class ContactTrack:
                 if f0 <= frame < f1:
                     t = (frame - f0) / (f1 - f0)
                     s = {k: (tuple((1 - t) * np.asarray(s0[k]) + t * np.asarray(s1[k]))
-                             if k == "shear" else (1 - t) * float(s0[k]) + t * float(s1[k]))
+                             if k in vectors else (1 - t) * float(s0[k]) + t * float(s1[k]))
                          for k in s0}
                     break
+        return s
+
+    def at(self, frame: int, elastomer: Elastomer = DEFAULT_ELASTOMER
+           ) -> Contact | LoadContact:
+        """The indenter's (or load's) state in a frame (linear between keyframes)."""
+        s = self._state(frame)
+        if self.is_load:
+            return LoadContact(radius=float(self.indenter.get("radius", 0.004)),
+                               profile=str(self.indenter.get("profile", "hertz")),
+                               x=float(s["x"]), y=float(s["y"]),
+                               force=tuple(float(v) for v in s["force"]),  # type: ignore
+                               torque=float(s["torque"]), elastomer=elastomer)
         return Contact(kind=str(self.indenter.get("kind", "sphere")),
                        radius=float(self.indenter.get("radius", 0.005)),
                        length=float(self.indenter.get("length", 0.0)),
@@ -119,9 +160,15 @@ class Scene:
     exposure_keyframes: list[dict[str, float]] = field(default_factory=list)
     contacts: list[ContactTrack] = field(default_factory=list)
     description: str = ""
+    elastomer: Elastomer = DEFAULT_ELASTOMER
 
-    def contacts_at(self, frame: int) -> list[Contact]:
-        return [track.at(frame) for track in self.contacts]
+    def contacts_at(self, frame: int) -> list[Contact | LoadContact]:
+        return [track.at(frame, self.elastomer) for track in self.contacts]
+
+    @property
+    def has_loads(self) -> bool:
+        """Whether any contact is a load (the scene then carries touch ground truth)."""
+        return any(track.is_load for track in self.contacts)
 
     def nuisances_at(self, frame: int) -> Nuisances:
         """Nuisances of one frame (exposure keyframes applied)."""
@@ -143,6 +190,17 @@ class Scene:
         return (repr(self.rig), repr(self.pad), self.supersample, self.mirrored, self.artwork)
 
 
+def _check_on_grid(load: LoadContact, frame: int) -> None:
+    """A load's disc must lie on the simulator's field grid, or its traction is cut off."""
+    x1 = FieldGrid.x0 + (FieldGrid.nx - 1) * FieldGrid.spacing
+    y1 = FieldGrid.y0 + (FieldGrid.ny - 1) * FieldGrid.spacing
+    if (load.x - load.radius < FieldGrid.x0 or load.x + load.radius > x1
+            or load.y - load.radius < FieldGrid.y0 or load.y + load.radius > y1):
+        raise ValueError(f"frame {frame}: the load disc (radius {load.radius} m at "
+                         f"({load.x}, {load.y}) m) leaves the simulated pad "
+                         f"[{FieldGrid.x0}, {x1:.4f}] x [{FieldGrid.y0}, {y1:.4f}] m")
+
+
 def parse_scene(doc: dict[str, Any], where: str = "scene") -> Scene:
     """Validate one scene mapping (defaults already merged)."""
     if not isinstance(doc, dict):
@@ -152,6 +210,19 @@ def parse_scene(doc: dict[str, Any], where: str = "scene") -> Scene:
     if not name or any(c in name for c in "/\\ "):
         raise SceneError(f"{where}: needs a name usable as a file name")
     _check_keys(doc, SCENE_KEYS, where)
+    el_doc = doc.get("elastomer") or {}
+    if not isinstance(el_doc, dict):
+        raise SceneError(f"{where}: elastomer must be a mapping "
+                         f"({', '.join(sorted(ELASTOMER_KEYS))})")
+    _check_keys(el_doc, ELASTOMER_KEYS, f"{where} elastomer")
+    try:
+        defaults = DEFAULT_ELASTOMER
+        elastomer = Elastomer(
+            youngs_modulus=float(el_doc.get("youngs_modulus", defaults.youngs_modulus)),
+            poisson_ratio=float(el_doc.get("poisson_ratio", defaults.poisson_ratio)),
+            thickness=float(el_doc.get("thickness", defaults.thickness)))
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"{where} elastomer: {exc}") from exc
     try:
         scene = Scene(
             name=name, frames=int(doc.get("frames", 1)), fps=float(doc.get("fps", 10.0)),
@@ -162,7 +233,7 @@ def parse_scene(doc: dict[str, Any], where: str = "scene") -> Scene:
             pad=PadParams(**(doc.get("pad") or {})),
             nuisances=Nuisances.from_dict(doc.get("nuisances")),
             exposure_keyframes=list(doc.get("exposure_keyframes") or []),
-            description=str(doc.get("description", "")))
+            description=str(doc.get("description", "")), elastomer=elastomer)
     except (TypeError, ValueError) as exc:
         raise SceneError(f"{where}: {exc}") from exc
     if scene.frames < 1 or scene.fps <= 0:
@@ -174,10 +245,21 @@ def parse_scene(doc: dict[str, Any], where: str = "scene") -> Scene:
         if not isinstance(c, dict) or "indenter" not in c:
             raise SceneError(f"{cw}: needs an indenter mapping and keyframes")
         _check_keys(c, {"indenter", "keyframes"}, cw)
-        _check_keys(c["indenter"], INDENTER_KEYS, f"{cw} indenter")
+        if not isinstance(c["indenter"], dict):
+            raise SceneError(f"{cw}: indenter must be a mapping")
+        load = c["indenter"].get("kind") == "load"
+        _check_keys(c["indenter"], LOAD_KEYS if load else INDENTER_KEYS, f"{cw} indenter")
+        if load and c["indenter"].get("profile", "hertz") not in PROFILES:
+            raise SceneError(f"{cw} indenter: profile must be one of {', '.join(PROFILES)}, "
+                             f"not {c['indenter'].get('profile')!r}")
+        if load and scene.mirrored:
+            raise SceneError(f"{cw}: load contacts need mirrored: false (their ground truth "
+                             "is in the pad frame, which a mirrored view would flip)")
         kfs = c.get("keyframes") or [{"frame": 0}]
         for kf in kfs:
-            _check_keys(kf, KEYFRAME_KEYS, f"{cw} keyframe")
+            if not isinstance(kf, dict):
+                raise SceneError(f"{cw}: every keyframe must be a mapping")
+            _check_keys(kf, LOAD_KEYFRAME_KEYS if load else KEYFRAME_KEYS, f"{cw} keyframe")
             if "frame" not in kf:
                 raise SceneError(f"{cw}: every keyframe needs a frame index")
         frames = [int(k["frame"]) for k in kfs]
@@ -186,7 +268,9 @@ def parse_scene(doc: dict[str, Any], where: str = "scene") -> Scene:
         track = ContactTrack(dict(c["indenter"]), list(kfs))
         try:
             for f in range(scene.frames):
-                track.at(f)
+                state = track.at(f, scene.elastomer)
+                if isinstance(state, LoadContact):
+                    _check_on_grid(state, f)
         except (TypeError, ValueError) as exc:
             raise SceneError(f"{cw}: {exc}") from exc
         scene.contacts.append(track)

@@ -15,10 +15,11 @@ from typing import Any, Callable, Iterator
 import numpy as np
 
 from ..camera_info import camera_info_fields
-from ..clouds import cloud_fields, pack_points
+from ..clouds import cloud_fields, pack_field, pack_points
 from ..images import image_fields
 from .artwork import load_artwork
 from .contact import Contact
+from .loads import TouchTruth
 from .optics import StereoRig
 from .render import Nuisances, Renderer, StereoFrame
 from .scenes import Scene
@@ -28,6 +29,9 @@ RIGHT_FRAME = "tactile_right_optical_frame"
 IMAGE = "sensor_msgs/msg/Image"
 INFO = "sensor_msgs/msg/CameraInfo"
 CLOUD = "sensor_msgs/msg/PointCloud2"
+WRENCH = "geometry_msgs/msg/WrenchStamped"
+CONTACT = "tactile_sl_msgs/msg/Contact"
+PAD_FRAME = "tactile_pad"
 
 
 @dataclass
@@ -36,6 +40,7 @@ class FrameIds:
 
     left: str = LEFT_FRAME
     right: str = RIGHT_FRAME
+    pad: str = PAD_FRAME  # touch ground truth (CONTRACT.md "Touch")
 
 
 class RendererCache:
@@ -78,7 +83,37 @@ def frame_messages(scene: Scene, renderer: Renderer, frame: StereoFrame, stamp_n
         ("right/camera_info", INFO, camera_info_fields(rig.right_info, stamp, ids.right)),
         ("ground_truth/points", CLOUD,
          cloud_fields(pack_points(xyz, rows, cols), stamp, ids.left)),
-    ]
+    ] + (touch_messages(frame.truth.touch, stamp, ids.pad) if scene.has_loads else [])
+
+
+def _vec(v: np.ndarray) -> dict[str, float]:
+    return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+
+
+def touch_messages(touch: TouchTruth | None, stamp: tuple[int, int], frame_id: str
+                   ) -> list[tuple[str, str, dict[str, Any]]]:
+    """Touch ground truth of a load scene's frame: wrench (all-load frames), field, contact."""
+    if touch is None:
+        raise ValueError("a frame of a load scene has no touch ground truth")
+    header = {"stamp": {"sec": stamp[0], "nanosec": stamp[1]}, "frame_id": frame_id}
+    out: list[tuple[str, str, dict[str, Any]]] = []
+    if touch.force is not None and touch.moment is not None:
+        out.append(("ground_truth/wrench", WRENCH, {
+            "header": header, "wrench": {"force": _vec(touch.force),
+                                         "torque": _vec(touch.moment)}}))
+    out.append(("ground_truth/field", CLOUD, cloud_fields(
+        pack_field(touch.position, touch.displacement, touch.rows, touch.cols), stamp,
+        frame_id)))
+    out.append(("ground_truth/contact", CONTACT, {
+        "header": header, "in_contact": bool(touch.in_contact), "area": float(touch.area),
+        "centroid": _vec(touch.centroid), "max_depth": float(touch.max_depth),
+        "normal_force": float(touch.normal_force), "shear_force": _vec(touch.shear_force),
+        "peak_pressure": float(touch.peak_pressure),
+        "cells_in_contact": int(touch.cells_in_contact),
+        "region_force": [float(v) for v in touch.region_force],
+        "region_area": [float(v) for v in touch.region_area],
+        "region_centroid": [_vec(c) for c in touch.region_centroid]}))
+    return out
 
 
 def iter_scene(scene: Scene, renderer: Renderer, ids: FrameIds | None = None
