@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# Regenerate the bundled bags (bags/*.mcap) from bags/scenes.yaml and the artwork the project
-# ships. Deterministic: the same inputs give the same bytes. Run through `make bags`
+# Regenerate the bundled bags (bags/*.mcap) from bags/scenes.yaml, bags/touch_scenes.yaml (known
+# loads, touch ground truth) and the artwork the project ships. Deterministic: the same inputs give the same bytes. Run through `make bags`
 # (`source env.sh && bash tools/make_bags.sh`).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -11,6 +11,7 @@ if [ ! -f "$ART" ] || [ ! -f "$ART.yaml" ]; then
   exit 1
 fi
 tactile-sl synth "$ROOT/bags/scenes.yaml" -o "$ROOT/bags" --artwork "$ART"
+tactile-sl synth "$ROOT/bags/touch_scenes.yaml" -o "$ROOT/bags" --artwork "$ART"
 for bag in "$ROOT"/bags/*.mcap; do
   size=$(stat -c %s "$bag")
   if [ "$size" -ge 5000000 ]; then
