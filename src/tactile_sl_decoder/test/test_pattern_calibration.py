@@ -229,7 +229,7 @@ def test_mirrored_views_with_the_wrong_setting_are_refused(tmp_path, renderer, a
     poses = random_poses(4, artwork, seed=6)
     folder = _write(render_pattern_views(renderer, artwork, poses, mirrored=True), tmp_path / "v")
     err = _bad(folder, tmp_path / "out", capsys)
-    assert "mirrored=false" in err
+    assert "mirrored=false" in err and "pass --mirrored" in err
 
 
 def test_too_few_views_are_refused(tmp_path, view_dir, capsys):

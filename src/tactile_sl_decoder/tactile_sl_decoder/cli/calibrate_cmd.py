@@ -170,6 +170,7 @@ def _run_board(args: argparse.Namespace) -> int:
 
 def _run_target(args: argparse.Namespace) -> int:
     """Printed-pattern calibration: decode every view, calibrate, report, write."""
+    from tactile_sl_camera.calibration import CalibrationError
     from tactile_sl_decoder.calibrate import (
         CalibrationOptions,
         ViewDecoder,
@@ -178,12 +179,14 @@ def _run_target(args: argparse.Namespace) -> int:
 
     target = _target(args)
     decoder = ViewDecoder(target)
-    views = []
+    views, first = [], None
     try:
-        for view in decoder.decode_all(_pairs(args)):
+        for i, (left, right) in enumerate(_pairs(args)):
+            view = decoder.decode(_gray(left), _gray(right), f"{i:03d}")
             print(f"\rview {view.name}: {len(view.left)} / {len(view.right)} cells decoded   ",
                   end="", file=sys.stderr, flush=True)
             views.append(view)
+            first = first or (left, right)
     finally:
         decoder.close()
     print(file=sys.stderr)
@@ -191,15 +194,42 @@ def _run_target(args: argparse.Namespace) -> int:
                               fix_k3=not args.free_k3, fix_intrinsics=args.fix_intrinsics)
     try:
         cal = calibrate_pattern_stereo(views, target, opts)
-    except Exception:
+    except CalibrationError as exc:
         for v in views:
             print(f"view {v.name}: cells L {len(v.left)} R {len(v.right)}", file=sys.stderr)
-        raise
+        raise CalibrationError(f"{exc}{_mirror_hint(target, views, first, opts)}") from None
     print(cal.report())
     print(cal.summary())
     written = cal.save(args.output, coverage=not args.no_coverage)
     print("wrote " + ", ".join(str(p) for p in written))
     return 0
+
+
+def _gray(image: Any) -> Any:
+    import cv2
+
+    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
+
+
+def _mirror_hint(target: Any, views: list[Any], first: Any, opts: Any) -> str:
+    """Advice when the first pair decodes far better with the other ``mirrored`` setting."""
+    from tactile_sl_decoder.calibrate import PatternTarget, ViewDecoder
+
+    if first is None or not views:
+        return ""
+    now = max(len(views[0].left), len(views[0].right))
+    other = ViewDecoder(PatternTarget(target.pattern, not target.mirrored))
+    try:
+        alt = other.decode(_gray(first[0]), _gray(first[1]))
+    finally:
+        other.close()
+    then = max(len(alt.left), len(alt.right))
+    if then >= opts.min_cells and then > 3 * now:
+        flag = "pass --mirrored" if not target.mirrored else "drop --mirrored"
+        return (f". The first view decodes {then} cells with mirrored="
+                f"{'false' if target.mirrored else 'true'} ({now} now): the cameras see the "
+                f"artwork {'as printed' if target.mirrored else 'mirrored'}; {flag}")
+    return ""
 
 
 def _run_simulate(args: argparse.Namespace) -> int:
