@@ -1,8 +1,10 @@
-"""`tactile-sl replay IN.mcap -o OUT.mcap [--pattern P.yaml]`: the decoder, offline.
+"""`tactile-sl replay IN.mcap -o OUT.mcap [--sensor S.yaml]`: the decoder, offline.
 
-Runs the same :class:`~tactile_sl_decoder.pipeline.StereoPipeline` as the ``decoder`` node
-over every stereo frame of a bag and writes ``/tactile/points`` (contract PointCloud2) for
-each frame that produced at least one point, stamped exactly like its input frame.
+Runs the same :class:`~tactile_sl_decoder.pipeline.StereoPipeline` and
+:class:`~tactile_sl_decoder.touch.stage.TouchStage` as the ``decoder`` node over every stereo
+frame of a bag and writes ``/tactile/points`` (contract PointCloud2) for each frame that
+produced at least one point, and the touch outputs (``field``, ``wrench``, ``contact``,
+``depth``) for every frame after the reference, all stamped exactly like their input frame.
 """
 from __future__ import annotations
 
@@ -29,9 +31,25 @@ def register(subparsers: Any) -> None:
                    help="classifier weights (default: the shipped ones)")
     p.add_argument("--mirrored", action="store_true",
                    help="the cameras see the artwork mirrored (sensor setting)")
+    p.add_argument("--sensor", metavar="SENSOR.yaml", default=None,
+                   help="sensor file: elastomer and pad frame (default: the shipped one)")
+    p.add_argument("--reference-frames", type=_positive_int, default=1, metavar="N",
+                   help="the first N decoded frames are the untouched reference (default 1)")
+    p.add_argument("--no-touch", action="store_true",
+                   help="write only /tactile/points (no field, wrench, contact, depth)")
     p.add_argument("--namespace", default="/tactile", help="topic namespace of the bag")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 1 <= value <= 1000:
+        raise argparse.ArgumentTypeError(f"must be in 1..1000, got {value}")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,11 +79,22 @@ def run(args: argparse.Namespace) -> int:
         params.decode.mirrored = bool(args.mirrored)
         pipeline = StereoPipeline(pattern, None, params)
         pipeline.load_classifier()    # fail before touching the output
+        touch = None
+        if not args.no_touch:
+            from tactile_sl_decoder.touch.sensor import load_sensor
+            from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
+
+            sensor = load_sensor(args.sensor)
+            touch = TouchStage(sensor, pattern.array.shape, pattern.pitch_m,
+                               bool(args.mirrored),
+                               TouchParams(reference_frames=args.reference_frames))
         total = count_bag_frames(args.input, args.namespace)
     except (BagError, PatternError, OSError, ValueError) as exc:
         print(f"tactile-sl replay: {exc}", file=sys.stderr)
         return 1
-    topic = bag_topics(args.namespace)["left_image"].rsplit("/left/", 1)[0] + "/points"
+    prefix = bag_topics(args.namespace)["left_image"].rsplit("/left/", 1)[0]
+    topic = prefix + "/points"
+    touch_written = 0
     show = not args.no_progress
     written = skipped = empty = 0
     t0 = time.perf_counter()
@@ -94,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
                 msg = cloud_fields(result.points, frame.stamp, result.frame_id)
                 writer.write(topic, "sensor_msgs/msg/PointCloud2", msg, frame.stamp_ns)
                 written += 1
+                touch_written += _write_touch(writer, touch, result, frame, prefix)
     except BagError as exc:
         print(f"\ntactile-sl replay: {exc}", file=sys.stderr)
         return 1
@@ -104,6 +134,33 @@ def run(args: argparse.Namespace) -> int:
     dt = time.perf_counter() - t0
     frames = written + skipped + empty
     print(f"replay: {frames} stereo frames in {dt:.1f} s ({frames / max(dt, 1e-9):.1f} fps): "
-          f"{written} clouds written to {out_path}, {empty} without points, {skipped} skipped",
+          f"{written} clouds written to {out_path}, {empty} without points, {skipped} skipped"
+          + (f"; touch outputs for {touch_written} frames" if touch is not None else ""),
           file=sys.stderr)
     return 0
+
+
+def _write_touch(writer: Any, touch: Any, result: Any, frame: Any, prefix: str) -> int:
+    """Touch outputs of one frame into the bag (1 if written, 0 while building the reference)."""
+    if touch is None:
+        return 0
+    from tactile_sl_decoder.touch.messages import pose_fields, touch_messages
+    from tactile_sl_decoder.touch.reference import ReferenceError
+
+    had_reference = touch.ready
+    try:
+        outputs = touch.update(result.points)
+    except ReferenceError as exc:
+        print(f"tactile-sl replay: frame {frame.stamp[0]}.{frame.stamp[1]:09d}: reference not "
+              f"usable ({exc}); trying again with the next frames", file=sys.stderr)
+        touch.tare()
+        return 0
+    if outputs is None:
+        if touch.ready and not had_reference:        # the reference was just taken
+            pose = pose_fields(touch.reference.pose, frame.stamp, result.frame_id)
+            writer.write(f"{prefix}/pad_pose", "geometry_msgs/msg/PoseStamped", pose,
+                         frame.stamp_ns)
+        return 0
+    for name, schema, fields in touch_messages(outputs, frame.stamp, touch.sensor.pad_frame):
+        writer.write(f"{prefix}/{name}", schema, fields, frame.stamp_ns)
+    return 1

@@ -7,9 +7,11 @@ Subscribes (relative names, sensor-data QoS)::
     always        : left/camera_info, right/camera_info      (sensor_msgs/CameraInfo)
 
 Publishes ``points`` (sensor_msgs/PointCloud2, one per stereo frame, stamped exactly like
-the left image) and, for inspection, ``left/symbols_decoded`` / ``right/symbols_decoded``
-(labelled and decoded SymbolArrays).  All the work is done by the shared
-:class:`~tactile_sl_decoder.pipeline.StereoPipeline`, so ``tactile-sl replay`` on a bag gives
+the left image), the touch outputs ``field``, ``wrench``, ``contact``, ``depth`` and
+``pad_pose`` (see :mod:`.touch_outputs`; service ``tare``) and, for inspection,
+``left/symbols_decoded`` / ``right/symbols_decoded`` (labelled and decoded SymbolArrays).
+All the work is done by the shared :class:`~tactile_sl_decoder.pipeline.StereoPipeline`,
+so ``tactile-sl replay`` on a bag gives
 the same points.  Bad input (encodings, sizes, CameraInfo, unsynchronised stereo, empty
 images) is reported with a throttled warning and the frame is skipped; the node keeps
 running.  Parameters: see ``config/decoder.yaml`` and ``docs/decoder.md``.
@@ -29,6 +31,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 from tactile_sl_camera.clouds import cloud_fields
 from tactile_sl_camera.images import ImageFormatError, to_gray
 from tactile_sl_camera.nodes.runner import run_node
+from tactile_sl_decoder.nodes.touch_outputs import TouchOutputs
 from tactile_sl_decoder.pipeline import (
     Glyphs,
     PatternSpec,
@@ -149,6 +152,8 @@ class DecoderNode(Node):
         out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
                              reliability=ReliabilityPolicy.RELIABLE)
         self.pub_points = self.create_publisher(PointCloud2, "points", out_qos)
+        self.touch = TouchOutputs(self, pattern.array.shape, pattern.pitch_m,
+                                  params.decode.mirrored, out_qos)
         self.pub_sym = {}
         if self.publish_symbols and SymbolArray is not None:
             for side in ("left", "right"):
@@ -268,6 +273,8 @@ class DecoderNode(Node):
         if len(result.points) or self.publish_empty:
             frame_id = result.frame_id or str(left_msg.header.frame_id)
             self.pub_points.publish(make_cloud(result, stamp, frame_id))
+        self.touch.process(result.points, stamp,
+                           result.frame_id or str(left_msg.header.frame_id))
         if self.pub_sym:
             for side, glyphs, src in (("left", result.left, left_msg),
                                       ("right", result.right, right_msg)):

@@ -1,0 +1,240 @@
+"""The decoder node's touch outputs: parameters, publishers, the ``tare`` service, pad pose.
+
+Publishes (relative names, reliable, depth 5; pad frame): ``field`` (PointCloud2),
+``wrench`` (WrenchStamped), ``contact`` (tactile_sl_msgs/Contact), ``depth`` (Image 32FC1),
+and ``pad_pose`` (PoseStamped of the pad frame in the left optical frame, transient local,
+plus ``/tf_static`` when tf2_ros is importable, i.e. on a system ROS install).  The work is
+:class:`tactile_sl_decoder.touch.stage.TouchStage`; message fields come from
+:mod:`tactile_sl_decoder.touch.messages`, the same dicts ``tactile-sl replay`` writes.
+"""
+from __future__ import annotations
+
+import array
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import Point, PoseStamped, Vector3, WrenchStamped
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Image, PointCloud2
+from std_srvs.srv import Trigger
+
+from tactile_sl_camera.nodes.camera_common import cloud_msg
+from tactile_sl_decoder.touch.messages import (
+    contact_fields,
+    depth_fields,
+    field_fields,
+    pose_fields,
+    wrench_fields,
+)
+from tactile_sl_decoder.touch.reference import ReferenceError
+from tactile_sl_decoder.touch.sensor import load_sensor
+from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
+
+try:
+    from tactile_sl_msgs.msg import Contact
+except ImportError:  # pragma: no cover - interfaces not built
+    Contact = None
+
+try:  # only on a system ROS install (tf2_ros is not a wheel)
+    from geometry_msgs.msg import TransformStamped
+    from tf2_ros.static_transform_broadcaster import StaticTransformBroadcaster
+except ImportError:
+    StaticTransformBroadcaster = None
+
+
+def _float(text: str, low: float, high: float) -> ParameterDescriptor:
+    return ParameterDescriptor(description=text, floating_point_range=[
+        FloatingPointRange(from_value=low, to_value=high)])
+
+
+def _int(text: str, low: int, high: int) -> ParameterDescriptor:
+    return ParameterDescriptor(description=text, integer_range=[
+        IntegerRange(from_value=low, to_value=high, step=1)])
+
+
+def _stamp(msg: Any, fields: dict[str, Any]) -> None:
+    msg.header.stamp.sec = fields["header"]["stamp"]["sec"]
+    msg.header.stamp.nanosec = fields["header"]["stamp"]["nanosec"]
+    msg.header.frame_id = fields["header"]["frame_id"]
+
+
+def _vec(cls: Any, d: dict[str, float]) -> Any:
+    return cls(x=d["x"], y=d["y"], z=d["z"])
+
+
+def wrench_msg(fields: dict[str, Any]) -> WrenchStamped:
+    """WrenchStamped from :func:`~tactile_sl_decoder.touch.messages.wrench_fields`."""
+    msg = WrenchStamped()
+    _stamp(msg, fields)
+    msg.wrench.force = _vec(Vector3, fields["wrench"]["force"])
+    msg.wrench.torque = _vec(Vector3, fields["wrench"]["torque"])
+    return msg
+
+
+def contact_msg(fields: dict[str, Any]) -> Any:
+    """Contact from :func:`~tactile_sl_decoder.touch.messages.contact_fields`."""
+    msg = Contact()
+    _stamp(msg, fields)
+    for key in ("in_contact", "area", "max_depth", "normal_force", "peak_pressure",
+                "cells_in_contact"):
+        setattr(msg, key, fields[key])
+    msg.centroid = _vec(Point, fields["centroid"])
+    msg.shear_force = _vec(Vector3, fields["shear_force"])
+    msg.region_force = array.array("d", fields["region_force"])
+    msg.region_area = array.array("d", fields["region_area"])
+    msg.region_centroid = [_vec(Point, c) for c in fields["region_centroid"]]
+    return msg
+
+
+def depth_msg(fields: dict[str, Any]) -> Image:
+    """Image from :func:`~tactile_sl_decoder.touch.messages.depth_fields`."""
+    msg = Image()
+    _stamp(msg, fields)
+    for key in ("height", "width", "encoding", "is_bigendian", "step"):
+        setattr(msg, key, fields[key])
+    msg.data = array.array("B", fields["data"])
+    return msg
+
+
+def pose_msg(fields: dict[str, Any]) -> PoseStamped:
+    """PoseStamped from :func:`~tactile_sl_decoder.touch.messages.pose_fields`."""
+    msg = PoseStamped()
+    _stamp(msg, fields)
+    msg.pose.position = _vec(Point, fields["pose"]["position"])
+    o = fields["pose"]["orientation"]
+    msg.pose.orientation.x, msg.pose.orientation.y = o["x"], o["y"]
+    msg.pose.orientation.z, msg.pose.orientation.w = o["z"], o["w"]
+    return msg
+
+
+class TouchOutputs:
+    """Everything touch-related of the decoder node."""
+
+    def __init__(self, node: Node, shape: tuple[int, int], pitch: float, mirrored: bool,
+                 out_qos: QoSProfile) -> None:
+        self.node = node
+        d = node.declare_parameter
+        d("touch", True, ParameterDescriptor(
+            description="Publish field, wrench, contact, depth and pad_pose (needs an "
+            "untouched pad at start: the reference)", read_only=True))
+        d("sensor_file", "", ParameterDescriptor(
+            description="Sensor YAML (elastomer, pad frame); empty = the shipped one",
+            read_only=True))
+        d("reference_frames", 1, _int("Decoded frames averaged into the untouched reference "
+                                      "(at start and after each tare)", 1, 1000))
+        d("elastomer.youngs_modulus", -1.0, _float(
+            "Pa; overrides the sensor file (< 0 = the file's value)", -1.0, 1e12))
+        d("elastomer.poisson_ratio", -1.0, _float(
+            "Overrides the sensor file (< 0 = the file's value), 0..0.5", -1.0, 0.5))
+        d("elastomer.thickness", -1.0, _float(
+            "m, layer bonded to a rigid window, 0 = half-space; overrides the sensor file "
+            "(< 0 = the file's value)", -1.0, 1.0))
+        d("pad_frame", "", ParameterDescriptor(
+            description="Frame id of the touch outputs; empty = the sensor file's",
+            read_only=True))
+        defaults = TouchParams()
+        d("contact_force_on", defaults.contact.force_on, _float(
+            "N: in_contact turns on above this normal force", 1e-4, 100.0))
+        d("contact_force_off", defaults.contact.force_off, _float(
+            "N: in_contact turns off below this normal force (hysteresis)", 1e-4, 100.0))
+        d("tare_max_depth", defaults.tare_max_depth, _float(
+            "m: a tare is refused while the pad is pressed in deeper than this (or in "
+            "contact)", 1e-7, 0.01))
+        gp = node.get_parameter
+        self.enabled = bool(gp("touch").value)
+        self.announced_waiting = False
+        if not self.enabled:
+            return
+
+        def override(name: str) -> float | None:
+            value = float(gp(name).value)
+            return None if value < 0 else value
+
+        sensor = load_sensor(str(gp("sensor_file").value) or None).with_overrides(
+            override("elastomer.youngs_modulus"), override("elastomer.poisson_ratio"),
+            override("elastomer.thickness"), str(gp("pad_frame").value) or None)
+        params = TouchParams(reference_frames=int(gp("reference_frames").value))
+        params.contact.force_on = float(gp("contact_force_on").value)
+        params.contact.force_off = float(gp("contact_force_off").value)
+        params.tare_max_depth = float(gp("tare_max_depth").value)
+        self.stage = TouchStage(sensor, shape, pitch, mirrored, params)
+        self.frame_id = sensor.pad_frame
+        self.pub_field = node.create_publisher(PointCloud2, "field", out_qos)
+        self.pub_wrench = node.create_publisher(WrenchStamped, "wrench", out_qos)
+        self.pub_contact = node.create_publisher(Contact, "contact", out_qos)
+        self.pub_depth = node.create_publisher(Image, "depth", out_qos)
+        latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.pub_pose = node.create_publisher(PoseStamped, "pad_pose", latched)
+        self.tf = StaticTransformBroadcaster(node) if StaticTransformBroadcaster else None
+        node.create_service(Trigger, "tare", self._on_tare)
+        e = sensor.elastomer
+        node.get_logger().info(
+            f"touch: E {e.youngs_modulus:.3g} Pa, nu {e.poisson_ratio:.3g}, "
+            f"{'half-space' if e.thickness == 0 else f'layer {e.thickness * 1e3:.3g} mm'} "
+            f"({sensor.source}); pad frame {self.frame_id}")
+
+    def _on_tare(self, _request: Any, response: Any) -> Any:
+        ok, text = self.stage.tare()
+        response.success, response.message = ok, text
+        log = self.node.get_logger()
+        (log.info if ok else log.warning)(f"tare {text}")
+        self.announced_waiting = False
+        return response
+
+    def process(self, points: np.ndarray, stamp: tuple[int, int], camera_frame: str) -> None:
+        """Touch outputs of one frame's points (nothing until a reference exists)."""
+        if not self.enabled:
+            return
+        had_reference = self.stage.ready
+        try:
+            result = self.stage.update(points)
+        except ReferenceError as exc:
+            self.node.get_logger().warning(f"touch: reference not usable ({exc}); trying "
+                                           f"again with the next frames")
+            self.stage.tare()
+            return
+        if result is None:
+            if not self.stage.ready and not self.announced_waiting:
+                self.announced_waiting = True
+                self.node.get_logger().info(
+                    f"touch: no outputs until the reference is taken from "
+                    f"{self.stage.params.reference_frames} decoded frame(s) of the untouched "
+                    f"pad")
+            if self.stage.ready and not had_reference:
+                self._announce_reference(stamp, camera_frame)
+            return
+        f = self.frame_id
+        self.pub_field.publish(cloud_msg(field_fields(result, stamp, f),
+                                         _time(stamp)))
+        self.pub_wrench.publish(wrench_msg(wrench_fields(result, stamp, f)))
+        self.pub_contact.publish(contact_msg(contact_fields(result.contact, stamp, f)))
+        self.pub_depth.publish(depth_msg(depth_fields(result.depth, stamp, f)))
+
+    def _announce_reference(self, stamp: tuple[int, int], camera_frame: str) -> None:
+        ref = self.stage.reference
+        assert ref is not None
+        fields = pose_fields(ref.pose, stamp, camera_frame)
+        self.pub_pose.publish(pose_msg(fields))
+        if self.tf is not None:
+            t = TransformStamped()
+            _stamp(t, fields)
+            t.child_frame_id = self.frame_id
+            p, o = fields["pose"]["position"], fields["pose"]["orientation"]
+            t.transform.translation = _vec(Vector3, p)
+            t.transform.rotation.x, t.transform.rotation.y = o["x"], o["y"]
+            t.transform.rotation.z, t.transform.rotation.w = o["z"], o["w"]
+            self.tf.sendTransform(t)
+        self.node.get_logger().info(
+            f"touch: reference of {len(ref.cells)} cells from {ref.frames} frame(s); pad "
+            f"frame fit residual {ref.pose.residual_rms * 1e6:.1f} um RMS "
+            f"({ref.pose.residual_max * 1e6:.1f} um max)")
+
+
+def _time(stamp: tuple[int, int]) -> Any:
+    from builtin_interfaces.msg import Time
+
+    return Time(sec=int(stamp[0]), nanosec=int(stamp[1]))

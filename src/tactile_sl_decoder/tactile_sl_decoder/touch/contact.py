@@ -1,0 +1,187 @@
+"""Contact state and depth map from per-cell forces and displacements (pad frame).
+
+What a grasping stack reads: whether something touches (with hysteresis, so that noise
+near the threshold does not chatter), where (pressure-weighted centroid), how much area
+presses, how deep the pad is pushed in (between cells too), and the separate contact
+regions with their own force, area and centroid.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+
+@dataclass
+class ContactParams:
+    """Thresholds of the contact state."""
+
+    force_on: float = 0.010    # N: in_contact turns on above this normal force ...
+    force_off: float = 0.005   # N: ... and off below this one (hysteresis)
+    area_fraction: float = 0.25  # a cell counts into the area above this x its region's peak
+    depth_upsample: int = 4    # depth-map pixels per cell pitch
+
+    def validate(self) -> "ContactParams":
+        """Raise ValueError for values outside their ranges."""
+        if not 0 < self.force_off <= self.force_on:
+            raise ValueError(f"need 0 < contact_force_off <= contact_force_on, got "
+                             f"{self.force_off} and {self.force_on}")
+        if not 0 < self.area_fraction < 1:
+            raise ValueError(f"area_fraction must be in (0, 1), got {self.area_fraction}")
+        if not 1 <= self.depth_upsample <= 16:
+            raise ValueError(f"depth_upsample must be in 1..16, got {self.depth_upsample}")
+        return self
+
+
+@dataclass
+class ContactState:
+    """The contract's Contact message, plus regions (all SI, pad frame)."""
+
+    in_contact: bool = False
+    area: float = 0.0
+    centroid: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    max_depth: float = 0.0
+    normal_force: float = 0.0
+    shear_force: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    peak_pressure: float = 0.0
+    cells_in_contact: int = 0
+    region_force: list[float] = field(default_factory=list)
+    region_area: list[float] = field(default_factory=list)
+    region_centroid: list[tuple[float, float, float]] = field(default_factory=list)
+
+
+def max_indentation(indent: np.ndarray) -> float:
+    """Largest indentation of a (rows, cols) grid (NaN = not decoded), between cells too.
+
+    A quadratic z = a + b x + c y + d x^2 + e y^2 + g x y is fitted by least squares to the
+    decoded cells of the 3x3 neighbourhood of the deepest cell; its stationary point gives
+    the peak when it is a maximum within one cell (a spherical tip's surface is exactly such
+    a paraboloid inside the contact).  Never less than the deepest decoded cell, never < 0.
+    """
+    if not np.isfinite(indent).any():
+        return 0.0
+    filled = np.where(np.isfinite(indent), indent, -np.inf)
+    r0, c0 = np.unravel_index(int(np.argmax(filled)), indent.shape)
+    best = float(indent[r0, c0])
+    rr, cc = np.mgrid[-1:2, -1:2]
+    r = r0 + rr.ravel()
+    c = c0 + cc.ravel()
+    ok = (r >= 0) & (r < indent.shape[0]) & (c >= 0) & (c < indent.shape[1])
+    r, c = r[ok], c[ok]
+    z = indent[r, c]
+    good = np.isfinite(z)
+    if good.sum() >= 7:
+        x, y, z = (c - c0)[good].astype(float), (r - r0)[good].astype(float), z[good]
+        a = np.column_stack([np.ones_like(x), x, y, x * x, y * y, x * y])
+        coef = np.linalg.lstsq(a, z, rcond=None)[0]
+        hess = np.array([[2 * coef[3], coef[5]], [coef[5], 2 * coef[4]]])
+        if np.all(np.linalg.eigvalsh(hess) < 0):
+            xs, ys = np.linalg.solve(hess, -coef[1:3])
+            if abs(xs) <= 1.0 and abs(ys) <= 1.0:
+                peak = float(coef[0] + coef[1] * xs + coef[2] * ys + coef[3] * xs * xs
+                             + coef[4] * ys * ys + coef[5] * xs * ys)
+                best = max(best, peak)
+    return max(best, 0.0)
+
+
+def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                  forces: np.ndarray, wrench: np.ndarray, shape: tuple[int, int], pitch: float,
+                  indent_grid: np.ndarray, was_in_contact: bool,
+                  params: ContactParams) -> ContactState:
+    """Contact state from per-cell forces (N) at rest positions (m) and the resultant.
+
+    The normal force, shear force and centroid come from the resultant (F, M) (the
+    pressure-weighted centroid of tractions at z = 0 is (M_y, -M_x) / P with P = -F_z,
+    since M = sum r x f); the area and the regions come from the per-cell map: a region is a
+    set of 8-connected pressing cells, and a cell counts into the area when it presses by
+    more than ``area_fraction`` of its region's peak (the map is smooth over about a cell,
+    so its low skirt lies outside the contact; 0.25 matches Hertz and uniform contacts of
+    radius 1-3 mm on the simulated scenes within the pitch's resolution).
+    """
+    press = np.maximum(-forces[:, 2], 0.0)
+    normal = max(-float(wrench[2]), 0.0)
+    cell_area = pitch * pitch
+    state = ContactState(normal_force=normal,
+                         shear_force=(float(wrench[0]), float(wrench[1]), 0.0),
+                         max_depth=max_indentation(indent_grid))
+    threshold = params.force_off if was_in_contact else params.force_on
+    state.in_contact = normal > threshold
+    pressing = press > 0.0
+    if normal <= 0.0 or not pressing.any():
+        return state
+    state.centroid = (float(wrench[4]) / normal, -float(wrench[3]) / normal, 0.0)
+    state.peak_pressure = float(press.max() / cell_area)
+    grid = np.zeros(shape, np.uint8)
+    grid[rows[pressing], cols[pressing]] = 1
+    count, labels = cv2.connectedComponents(grid, connectivity=8)
+    region = labels[rows, cols]
+    regions = []
+    for k in range(1, count):
+        sel = pressing & (region == k)
+        w = press[sel]
+        f = float(w.sum())
+        c = (w[:, None] * rest_xy[sel]).sum(axis=0) / f
+        inside = int((w > params.area_fraction * w.max()).sum())
+        regions.append((f, inside * cell_area, (float(c[0]), float(c[1]), 0.0), inside))
+    regions.sort(key=lambda t: -t[0])
+    state.region_force = [r[0] for r in regions]
+    state.region_area = [r[1] for r in regions]
+    state.region_centroid = [r[2] for r in regions]
+    state.area = float(sum(state.region_area))
+    state.cells_in_contact = int(sum(r[3] for r in regions))
+    return state
+
+
+@dataclass(frozen=True)
+class DepthGrid:
+    """Where the depth map's pixels lie: pixel (i, j) is at (x0 + j res, y0 + i res, 0)."""
+
+    x0: float
+    y0: float
+    resolution: float
+    width: int
+    height: int
+
+
+def depth_grid(shape: tuple[int, int], pitch: float, upsample: int,
+               mirrored: bool = False) -> DepthGrid:
+    """The depth map covers the pattern's cell centres, ``upsample`` pixels per pitch."""
+    rows, cols = shape
+    res = pitch / upsample
+    width = (cols - 1) * upsample + 1
+    height = (rows - 1) * upsample + 1
+    return DepthGrid(-(cols - 1) / 2.0 * pitch, -(rows - 1) / 2.0 * pitch, res, width, height)
+
+
+def depth_map(indent: np.ndarray, upsample: int, mirrored: bool = False) -> np.ndarray:
+    """Indentation (m, > 0 pressed in) bilinear between cell centres; NaN near gaps.
+
+    ``indent`` is the (rows, cols) cell grid (NaN where a cell was not decoded).  A pixel is
+    NaN when any of the cells it interpolates between is missing.  With ``mirrored`` the
+    columns are flipped so that image x always runs along the pad frame's x.
+    """
+    grid = indent[:, ::-1] if mirrored else indent
+    rows, cols = grid.shape
+    t = np.arange(upsample, dtype=np.float64) / upsample
+    ri = np.minimum(np.repeat(np.arange(rows - 1), upsample), rows - 2)
+    rt = np.tile(t, rows - 1)
+    ci = np.minimum(np.repeat(np.arange(cols - 1), upsample), cols - 2)
+    ct = np.tile(t, cols - 1)
+    ri = np.append(ri, rows - 2)
+    rt = np.append(rt, 1.0)
+    ci = np.append(ci, cols - 2)
+    ct = np.append(ct, 1.0)
+    wr = rt[:, None]
+    wc = ct[None, :]
+    out = np.zeros((len(ri), len(ci)))
+    bad = np.zeros(out.shape, bool)
+    for dr, dc, w in ((0, 0, (1 - wr) * (1 - wc)), (0, 1, (1 - wr) * wc),
+                      (1, 0, wr * (1 - wc)), (1, 1, wr * wc)):
+        corner = grid[np.ix_(ri + dr, ci + dc)]
+        missing = ~np.isfinite(corner)
+        bad |= missing & (w > 0)
+        out += w * np.where(missing, 0.0, corner)
+    out[bad] = np.nan
+    out[::upsample, ::upsample] = grid     # cell centres keep their value even next to a gap
+    return out.astype(np.float32)

@@ -1,0 +1,189 @@
+"""The touch stage: one frame's decoded points in; displacement, forces, contact out.
+
+It also gives the wrench and the depth map; no rclpy, used by the decoder node and
+``tactile-sl replay`` alike, so both give the same bytes.
+
+Life cycle: the first ``reference_frames`` frames that decode build the reference (the pad
+must be untouched); :meth:`TouchStage.tare` starts a new one, refused while the pad is
+visibly touched.  Until a reference exists :meth:`TouchStage.update` returns None.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tactile_sl_decoder.touch.contact import (
+    ContactParams,
+    ContactState,
+    contact_state,
+    depth_grid,
+    depth_map,
+)
+from tactile_sl_decoder.touch.reference import (
+    PadPose,
+    ReferenceBuilder,
+    fit_pad_pose,
+    nominal_positions,
+)
+from tactile_sl_decoder.touch.sensor import SensorConfig
+from tactile_sl_decoder.touch.traction import TractionParams, TractionSolver
+
+
+@dataclass
+class TouchParams:
+    """Settings of the touch stage (the decoder node exposes them as parameters)."""
+
+    reference_frames: int = 1
+    traction: TractionParams = field(default_factory=TractionParams)
+    contact: ContactParams = field(default_factory=ContactParams)
+    tare_max_depth: float = 5e-5   # m: a tare is refused above this indentation ...
+                                   # ... or while in_contact
+
+    def validate(self) -> "TouchParams":
+        """Raise ValueError for values outside their ranges."""
+        if not 1 <= self.reference_frames <= 1000:
+            raise ValueError(f"reference_frames must be in 1..1000, got "
+                             f"{self.reference_frames}")
+        if self.tare_max_depth <= 0:
+            raise ValueError(f"tare_max_depth must be > 0, got {self.tare_max_depth}")
+        self.traction.validate()
+        self.contact.validate()
+        return self
+
+
+@dataclass
+class Reference:
+    """The untouched pad: which cells, where (pad frame), and the pad pose."""
+
+    cells: np.ndarray        # (N,) flat cell indices row * cols + col
+    rest: np.ndarray         # (N, 3) reference positions, pad frame
+    pose: PadPose
+    frames: int
+
+
+@dataclass
+class TouchResult:
+    """Touch outputs of one stereo frame (pad frame, SI)."""
+
+    rows: np.ndarray           # (M,) cells decoded in this frame
+    cols: np.ndarray
+    position: np.ndarray       # (M, 3) current positions
+    displacement: np.ndarray   # (M, 3) from the reference
+    force: np.ndarray          # (M, 3) N on each decoded cell
+    wrench_force: np.ndarray   # (3,) N
+    wrench_moment: np.ndarray  # (3,) N m about the pad origin
+    contact: ContactState
+    depth: np.ndarray          # (H, W) float32 m of indentation, NaN where not decoded
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+
+class TouchStage:
+    """Keeps the reference and turns each frame's points into touch outputs."""
+
+    def __init__(self, sensor: SensorConfig, shape: tuple[int, int], pitch: float,
+                 mirrored: bool = False, params: TouchParams | None = None) -> None:
+        if pitch <= 0:
+            raise ValueError(f"the pattern's pitch must be > 0 for touch outputs, got {pitch}")
+        self.sensor = sensor
+        self.shape = (int(shape[0]), int(shape[1]))
+        self.pitch = float(pitch)
+        self.mirrored = bool(mirrored)
+        self.params = (params or TouchParams()).validate()
+        self.depth_grid = depth_grid(self.shape, self.pitch, self.params.contact.depth_upsample,
+                                     self.mirrored)
+        self.reference: Reference | None = None
+        self.solver: TractionSolver | None = None
+        self._builder = ReferenceBuilder(self.params.reference_frames, self.shape)
+        self._in_contact = False
+        self._last: TouchResult | None = None
+        self._index = np.full(self.shape[0] * self.shape[1], -1, np.int64)
+
+    # ------------------------------------------------------------------ reference
+
+    @property
+    def ready(self) -> bool:
+        """A reference exists and frames produce touch outputs."""
+        return self.reference is not None
+
+    def tare(self) -> tuple[bool, str]:
+        """Start a new reference from the next frames; refused while visibly touched."""
+        last = self._last
+        if last is not None and (last.contact.in_contact
+                                 or last.contact.max_depth > self.params.tare_max_depth):
+            return False, (f"refused: the pad is touched (normal force "
+                           f"{last.contact.normal_force * 1e3:.1f} mN, indentation "
+                           f"{last.contact.max_depth * 1e6:.0f} um); release it and tare again")
+        self._builder = ReferenceBuilder(self.params.reference_frames, self.shape)
+        self.reference = None
+        self.solver = None
+        self._last = None
+        self._in_contact = False
+        return True, (f"new reference from the next {self.params.reference_frames} decoded "
+                      f"frame(s)")
+
+    def _set_reference(self) -> None:
+        cells, mean = self._builder.result()
+        rows, cols = cells // self.shape[1], cells % self.shape[1]
+        nominal = nominal_positions(rows, cols, self.shape, self.pitch, self.mirrored)
+        pose = fit_pad_pose(nominal, mean)
+        rest = pose.to_pad(mean)
+        self.solver = TractionSolver(self.sensor.elastomer, self.pitch, self.shape, cells,
+                                     self.params.traction, self.mirrored)
+        self._index[:] = -1
+        self._index[cells] = np.arange(len(cells))
+        self.reference = Reference(cells, rest, pose, self._builder.collected)
+
+    # ------------------------------------------------------------------ frames
+
+    def update(self, points: np.ndarray) -> TouchResult | None:
+        """Touch outputs of one frame's contract points (None while building a reference)."""
+        if len(points) == 0:
+            return None
+        rows = points["row"].astype(np.int64)
+        cols = points["col"].astype(np.int64)
+        xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64)
+        if self.reference is None:
+            if self._builder.add(rows, cols, xyz):
+                self._set_reference()
+            return None
+        assert self.solver is not None
+        t0 = time.perf_counter()
+        ref = self.reference
+        position = ref.pose.to_pad(xyz)
+        flat = rows * self.shape[1] + cols
+        k = self._index[flat]
+        known = k >= 0
+        # A cell missing from the reference is measured against its nominal rest position.
+        rest = nominal_positions(rows, cols, self.shape, self.pitch, self.mirrored)
+        rest[known] = ref.rest[k[known]]
+        displacement = position - rest
+        n = len(ref.cells)
+        disp_ref = np.zeros((n, 3))
+        valid = np.zeros(n, bool)
+        disp_ref[k[known]] = displacement[known]
+        valid[k[known]] = True
+        t1 = time.perf_counter()
+        forces_ref, wrench = self.solver.solve(disp_ref, valid)
+        t2 = time.perf_counter()
+        ref_rows, ref_cols = ref.cells // self.shape[1], ref.cells % self.shape[1]
+        rest_xy = nominal_positions(ref_rows, ref_cols, self.shape, self.pitch,
+                                    self.mirrored)
+        wrench_force, wrench_moment = wrench[:3], wrench[3:]
+        indent = np.full(self.shape, np.nan)
+        indent[rows, cols] = -displacement[:, 2]
+        contact = contact_state(rest_xy[:, :2], ref_rows, ref_cols, forces_ref, wrench,
+                                self.shape, self.pitch, indent, self._in_contact,
+                                self.params.contact)
+        self._in_contact = contact.in_contact
+        depth = depth_map(indent, self.params.contact.depth_upsample, self.mirrored)
+        force = np.zeros((len(rows), 3))
+        force[known] = forces_ref[k[known]]
+        t3 = time.perf_counter()
+        result = TouchResult(rows, cols, position, displacement, force, wrench_force,
+                             wrench_moment, contact, depth,
+                             {"displacement": 1e3 * (t1 - t0), "traction": 1e3 * (t2 - t1),
+                              "contact": 1e3 * (t3 - t2), "touch": 1e3 * (t3 - t0)})
+        self._last = result
+        return result
