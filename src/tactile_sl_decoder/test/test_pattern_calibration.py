@@ -252,3 +252,13 @@ def test_views_all_at_one_pose_are_degenerate(tmp_path, renderer, artwork, capsy
 def test_calibration_options_are_checked_for_view_count(target):
     with pytest.raises(Exception, match="no image pairs"):
         calibrate_pattern_stereo([], target, CalibrationOptions())
+
+
+def test_refine_cli_repairs_a_knocked_camera(untouched_bag, renderer, tmp_path, capsys):
+    knocked = _bad_rig(renderer.rig, (0.2, 0.0, 0.0))
+    save_camera_info_yaml(tmp_path / "left.yaml", knocked[0])
+    save_camera_info_yaml(tmp_path / "right.yaml", knocked[1])
+    out = tmp_path / "refined"
+    assert _cli("--refine", untouched_bag, "--calibration", tmp_path, "--target", "-o", out) == 0
+    assert _cli("--check", untouched_bag, "--calibration", out, "--target") == 0
+    assert "verdict: PASS" in capsys.readouterr().out
