@@ -190,6 +190,11 @@ class TouchOutputs:
         if not self.enabled:
             return
         had_reference = self.stage.ready
+        if not had_reference and not self.announced_waiting:
+            self.announced_waiting = True
+            self.node.get_logger().info(
+                f"touch: no outputs until the reference is taken from "
+                f"{self.stage.params.reference_frames} decoded frame(s) of the untouched pad")
         try:
             result = self.stage.update(points)
         except ReferenceError as exc:
@@ -198,12 +203,6 @@ class TouchOutputs:
             self.stage.tare()
             return
         if result is None:
-            if not self.stage.ready and not self.announced_waiting:
-                self.announced_waiting = True
-                self.node.get_logger().info(
-                    f"touch: no outputs until the reference is taken from "
-                    f"{self.stage.params.reference_frames} decoded frame(s) of the untouched "
-                    f"pad")
             if self.stage.ready and not had_reference:
                 self._announce_reference(stamp, camera_frame)
             return

@@ -1,0 +1,100 @@
+"""The decoder node's touch outputs over DDS equal `tactile-sl replay`'s, field for field.
+
+(Every field and array compares equal, so the payload bytes are the same; the CDR padding
+bytes are not compared: Fast CDR leaves them unset.)
+
+Also: nothing is published before the reference (said once), ``tare`` is refused while the
+pad is pressed, and a bad sensor file stops the node with one FATAL line.
+"""
+import time
+
+import pytest
+from test_decoder_node import (  # noqa: F401  (ros is a fixture)
+    BAG,
+    _bag_messages,
+    _io,
+    _send_until_cloud,
+    _wait_matched,
+    ros,
+)
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+TOUCH_TOPICS = ("field", "wrench", "contact", "depth")
+
+
+def _offline(tmp_path):
+    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_decoder.cli import main as cli_main
+
+    out = tmp_path / "out.mcap"
+    assert cli_main(["replay", str(BAG), "-o", str(out), "--no-progress"]) == 0
+    offline: dict[str, dict] = {t: {} for t in TOUCH_TOPICS}
+    reader = BagReader(out)
+    for raw in reader.raw_messages([f"/tactile/{t}" for t in TOUCH_TOPICS]):
+        topic = raw.topic.rsplit("/", 1)[1]
+        offline[topic][raw.log_time_ns] = bytes(raw.data)
+    return offline
+
+
+def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros, tmp_path):
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import Image, PointCloud2
+    from std_srvs.srv import Trigger
+
+    from tactile_sl_msgs.msg import Contact
+
+    offline = _offline(tmp_path)
+    assert len(offline["wrench"]) >= 2
+
+    proc = ros.start()
+    pubs, clouds = _io(ros)
+    received: dict[str, dict] = {t: {} for t in TOUCH_TOPICS}
+    for topic, kind in zip(TOUCH_TOPICS, (PointCloud2, WrenchStamped, Contact, Image)):
+        def keep(msg, topic=topic):
+            stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+            received[topic][stamp] = msg
+        ros.node.create_subscription(kind, f"/tactile/{topic}", keep, 10)
+    _wait_matched(ros, pubs)
+    frames: dict = {}
+    for kind, side, m in _bag_messages(4):
+        frames.setdefault((m.header.stamp.sec, m.header.stamp.nanosec), []).append((kind, side, m))
+    for stamp, parts in sorted(frames.items()):
+        def publish(parts=parts):
+            for kind, side, m in sorted(parts, key=lambda p: p[0] != "info"):
+                pubs[(kind, side)].publish(m)
+                ros.spin(0.2 if kind == "info" else 0.02)
+        assert _send_until_cloud(ros, clouds, stamp, publish), proc.lines[-5:]
+    end = time.monotonic() + 5
+    while time.monotonic() < end and len(received["depth"]) < len(frames) - 1:
+        ros.spin(0.05)
+    assert proc.wait_for("no outputs until the reference", 1.0), proc.lines
+    assert sum("no outputs until the reference" in line for line in proc.lines) == 1
+    assert proc.wait_for("fit residual", 1.0)
+    types = dict(zip(TOUCH_TOPICS, (PointCloud2, WrenchStamped, Contact, Image)))
+    for topic in TOUCH_TOPICS:
+        assert len(received[topic]) == len(frames) - 1, (topic, proc.lines[-5:])
+        for stamp, msg in received[topic].items():
+            replayed = deserialize_message(offline[topic][stamp], types[topic])
+            assert msg == replayed, f"{topic} at {stamp} differs from replay"
+
+    client = ros.node.create_client(Trigger, "/tactile/tare")
+    assert client.wait_for_service(timeout_sec=10.0)
+    future = client.call_async(Trigger.Request())
+    end = time.monotonic() + 10
+    while not future.done() and time.monotonic() < end:
+        ros.spin(0.05)
+    assert future.done() and not future.result().success       # the bag's sphere presses
+    assert "refused" in future.result().message
+
+
+def test_bad_sensor_file_is_one_fatal_line(ros, tmp_path):
+    bad = tmp_path / "sensor.yaml"
+    bad.write_text("tactile_sl_sensor: 1\nelastomer: {youngs_modulus: -3.0e+5, "
+                   "poisson_ratio: 0.49, thickness: 0.0}\n")
+    proc = ros.start("-p", f"sensor_file:={bad}")
+    code = proc.proc.wait(30)
+    text = "\n".join(proc.lines)
+    assert code == 1 and "FATAL" in text and "youngs_modulus" in text, text
+    assert "Traceback" not in text
