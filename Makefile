@@ -1,7 +1,7 @@
 # tactile-sl: the two commands a user needs are `make demo` and `make test`.
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
-ENV := source env.sh &&
+ENV := TACTILE_SL_NETWORK=loopback source env.sh &&
 
 .PHONY: help setup build test lint unit demo bags bench clean
 

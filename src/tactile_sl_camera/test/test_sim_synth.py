@@ -156,5 +156,5 @@ def test_bundled_bags_are_small_complete_and_readable():
             assert reader.get_header().profile == "ros2"
             counts = summary.statistics.channel_message_counts
             topics = {c.topic: counts[cid] for cid, c in summary.channels.items()}
-        assert set(topics) == set(TOPICS), bag
+        assert set(topics) >= set(TOPICS), bag      # touch bags add ground_truth topics
         assert len(set(topics.values())) == 1  # every topic once per frame

@@ -37,7 +37,7 @@ def _offline(tmp_path):
     return offline
 
 
-def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros, tmp_path):
+def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros, tmp_path):  # noqa: F811,E501
     from geometry_msgs.msg import WrenchStamped
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import Image, PointCloud2
@@ -89,7 +89,7 @@ def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros
     assert "refused" in future.result().message
 
 
-def test_bad_sensor_file_is_one_fatal_line(ros, tmp_path):
+def test_bad_sensor_file_is_one_fatal_line(ros, tmp_path):  # noqa: F811
     bad = tmp_path / "sensor.yaml"
     bad.write_text("tactile_sl_sensor: 1\nelastomer: {youngs_modulus: -3.0e+5, "
                    "poisson_ratio: 0.49, thickness: 0.0}\n")

@@ -17,9 +17,9 @@ import numpy as np
 from tactile_sl_decoder.touch.contact import (
     ContactParams,
     ContactState,
+    DepthMapper,
     contact_state,
     depth_grid,
-    depth_map,
 )
 from tactile_sl_decoder.touch.reference import (
     PadPose,
@@ -61,6 +61,7 @@ class Reference:
     rest: np.ndarray         # (N, 3) reference positions, pad frame
     pose: PadPose
     frames: int
+    nominal: np.ndarray      # (N, 3) nominal rest positions (z = 0): where tractions act
 
 
 @dataclass
@@ -93,6 +94,7 @@ class TouchStage:
         self.params = (params or TouchParams()).validate()
         self.depth_grid = depth_grid(self.shape, self.pitch, self.params.contact.depth_upsample,
                                      self.mirrored)
+        self._depth = DepthMapper(self.shape, self.params.contact.depth_upsample, self.mirrored)
         self.reference: Reference | None = None
         self.solver: TractionSolver | None = None
         self._builder = ReferenceBuilder(self.params.reference_frames, self.shape)
@@ -133,7 +135,7 @@ class TouchStage:
                                      self.params.traction, self.mirrored)
         self._index[:] = -1
         self._index[cells] = np.arange(len(cells))
-        self.reference = Reference(cells, rest, pose, self._builder.collected)
+        self.reference = Reference(cells, rest, pose, self._builder.collected, nominal)
 
     # ------------------------------------------------------------------ frames
 
@@ -168,16 +170,14 @@ class TouchStage:
         forces_ref, wrench = self.solver.solve(disp_ref, valid)
         t2 = time.perf_counter()
         ref_rows, ref_cols = ref.cells // self.shape[1], ref.cells % self.shape[1]
-        rest_xy = nominal_positions(ref_rows, ref_cols, self.shape, self.pitch,
-                                    self.mirrored)
         wrench_force, wrench_moment = wrench[:3], wrench[3:]
         indent = np.full(self.shape, np.nan)
         indent[rows, cols] = -displacement[:, 2]
-        contact = contact_state(rest_xy[:, :2], ref_rows, ref_cols, forces_ref, wrench,
+        contact = contact_state(ref.nominal[:, :2], ref_rows, ref_cols, forces_ref, wrench,
                                 self.shape, self.pitch, indent, self._in_contact,
                                 self.params.contact)
         self._in_contact = contact.in_contact
-        depth = depth_map(indent, self.params.contact.depth_upsample, self.mirrored)
+        depth = self._depth(indent)
         force = np.zeros((len(rows), 3))
         force[known] = forces_ref[k[known]]
         t3 = time.perf_counter()

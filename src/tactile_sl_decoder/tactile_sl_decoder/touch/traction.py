@@ -15,7 +15,7 @@ that a frame costs two matrix-vector products:
   unbiased: the whole displacement field, far field included, is fitted (on the simulated
   scenes the resultant is within 1 % for 0.05-2 N, and 2 mN on an untouched pad with 3 um
   displacement noise).
-* **Map** (``map_weight`` a_m = 0.3): per-cell traction for the ``field`` cloud and the
+* **Map** (``map_weight`` a_m = 1): per-cell traction for the ``field`` cloud and the
   contact state.  Per cell, the weakly regularised solution is dominated by noise; the
   strong weight trades resolution (about one cell) for a clean map.  The map is restricted
   to the contact support (cells pressing by more than ``support_fraction`` of the peak and
@@ -23,9 +23,11 @@ that a frame costs two matrix-vector products:
   non-negative), and the map is scaled so that its sums equal the resultant.
 
 The weights were chosen on simulated Hertz contacts (docs/touch.md): a_w from 1e-5 to 1e-2
-gives the same resultant within 0.1 %; a_m = 0.3 is the weakest map weight whose untouched
-pad stays below the contact threshold.  Reference cells not decoded in a frame get their
-displacement from decoded neighbours (normalised convolution) before the products.
+gives the same half-space resultant within 0.1 % but a_w >= 1e-2 biases the stiffer 2 mm
+layer by 5-50 %; a_m = 1 gives the best contact areas (within about 20 %) with the contact
+rule of :func:`~tactile_sl_decoder.touch.contact.contact_state`.  Reference cells not
+decoded in a frame get their displacement from decoded neighbours (normalised
+convolution) before the products.
 """
 from __future__ import annotations
 
@@ -43,9 +45,9 @@ class TractionParams:
     """Weights and thresholds of the inversion (see the module docstring)."""
 
     wrench_weight: float = 1e-3      # a_w: Tikhonov weight of the resultant (x mean diag)
-    map_weight: float = 0.3          # a_m: Tikhonov weight of the per-cell map
+    map_weight: float = 1.0          # a_m: Tikhonov weight of the per-cell map
     support_fraction: float = 0.05   # support: pressing force > this x the peak cell ...
-    support_floor: float = 2e-4      # ... and > this, N per cell
+    support_floor: float = 5e-5      # ... and > this, N per cell
 
     def validate(self) -> "TractionParams":
         """Raise ValueError for values outside their ranges."""
