@@ -8,7 +8,10 @@ Modes, one per source option (mutually exclusive), dispatched by :func:`run`:
 - ``--simulate N``: write N simulated view pairs and the true calibration (pattern views with
   ``--target``, else checkerboards);
 - ``--check BAG``: judge a calibration from untouched frames of the assembled sensor;
-- ``--refine BAG``: re-estimate the extrinsics from such frames, intrinsics fixed.
+- ``--refine BAG``: re-estimate the extrinsics from such frames, intrinsics fixed;
+- ``--bag BAG --loads LOADS.yaml``: force calibration, the elastomer's Young's modulus (and
+  with ``--fit-thickness`` its thickness) from frames with known loads
+  (:mod:`tactile_sl_decoder.touch.force_calibration`), written as OUT/sensor.yaml.
 """
 from __future__ import annotations
 
@@ -87,6 +90,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     h.add_argument("--left-info", help="left camera_info YAML (overrides --calibration)")
     h.add_argument("--right-info", help="right camera_info YAML (overrides --calibration)")
     h.add_argument("--frames", type=int, default=3, help="untouched frames used (default 3)")
+    f = p.add_argument_group("force calibration (--bag BAG --loads LOADS.yaml)")
+    f.add_argument("--loads", metavar="LOADS.yaml", help="known normal loads, "
+                   "'loads: [{frame: I, normal_force: N}, ...]' (frames of --bag from 0, "
+                   "pressing force in N); fits the Young's modulus and writes OUT/sensor.yaml")
+    f.add_argument("--sensor", metavar="SENSOR.yaml", default=None,
+                   help="starting sensor file: Poisson ratio, thickness, pad frame (default: "
+                   "the shipped one)")
+    f.add_argument("--fit-thickness", action="store_true",
+                   help="also choose the layer thickness (0 = half-space ... 8 mm) that best "
+                   "explains the displacement fields")
+    f.add_argument("--reference-frames", type=int, default=1, metavar="N",
+                   help="the first N decoded frames are the untouched reference (default 1)")
     p.add_argument("--left-topic", default="/tactile/left/image_raw")
     p.add_argument("--right-topic", default="/tactile/right/image_raw")
     p.add_argument("--every", type=int, default=1, help="use every Nth pair of a bag")
@@ -103,6 +118,7 @@ MODES: tuple[tuple[str, Callable[[argparse.Namespace], bool]], ...] = (
     ("simulate", lambda a: a.simulate is not None),
     ("check", lambda a: a.check is not None),
     ("refine", lambda a: a.refine is not None),
+    ("force", lambda a: a.loads is not None),        # --bag with --loads
     ("target", lambda a: a.target is not None),      # --folder / --bag with --target
     ("board", lambda a: True),                       # --folder / --bag: checkerboard
 )
@@ -122,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
 
     handlers: dict[str, Callable[[argparse.Namespace], int]] = {
         "board": _run_board, "target": _run_target, "simulate": _run_simulate,
-        "check": _run_check, "refine": _run_refine}
+        "check": _run_check, "refine": _run_refine, "force": _run_force}
     try:
         return handlers[_mode(args)](args)
     except (CalibrationError, BagError, CameraInfoError, ValueError, OSError) as exc:
@@ -344,4 +360,63 @@ def _run_refine(args: argparse.Namespace) -> int:
         "left.yaml": camera_info_yaml_text(result.left).encode(),
         "right.yaml": camera_info_yaml_text(result.right).encode()})
     print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def _run_force(args: argparse.Namespace) -> int:
+    """Fit the elastomer to a recording with known loads; write OUT/sensor.yaml."""
+    from tactile_sl_camera.images import to_gray
+    from tactile_sl_decoder.calibrate import write_atomically
+    from tactile_sl_decoder.pipeline import (
+        PatternSpec,
+        PipelineInputError,
+        PipelineParams,
+        StereoPipeline,
+        bag_frames,
+    )
+    from tactile_sl_decoder.touch.force_calibration import calibrate_forces, load_loads_file
+    from tactile_sl_decoder.touch.sensor import load_sensor, sensor_yaml_text
+
+    if not args.bag:
+        raise ValueError("--loads needs the recording: --bag BAG")
+    if not 1 <= args.reference_frames <= 1000:
+        raise ValueError(f"--reference-frames must be in 1..1000, got {args.reference_frames}")
+    loads = load_loads_file(args.loads)
+    start = load_sensor(args.sensor)
+    pattern = PatternSpec.load(args.target or None)
+    params = PipelineParams()
+    params.decode.mirrored = bool(args.mirrored)
+    pipeline = StereoPipeline(pattern, None, params)
+    frames = []
+    try:
+        for frame in bag_frames(args.bag, "/tactile", ground_truth=False):
+            if frame.left_info is None or frame.right_info is None:
+                continue
+            try:
+                result = pipeline.process(to_gray(frame.left_image), to_gray(frame.right_image),
+                                          frame.left_info, frame.right_info)
+            except PipelineInputError as exc:
+                print(f"{PROG}: frame {len(frames)} skipped: {exc}", file=sys.stderr)
+                continue
+            if len(result.points):
+                frames.append(result.points)
+    finally:
+        pipeline.close()
+    print(f"{PROG}: {len(frames)} decoded frames in {args.bag}; fitting "
+          f"{len(loads)} known loads", file=sys.stderr)
+
+    def progress(h: float, residual: float) -> None:
+        if args.fit_thickness:
+            print(f"  thickness {h * 1e3:.3g} mm: displacement residual {residual:.4f}",
+                  file=sys.stderr)
+
+    fit = calibrate_forces(frames, loads, start, pattern.array.shape, pattern.pitch_m,
+                           bool(args.mirrored), args.reference_frames, args.fit_thickness,
+                           progress)
+    print(fit.report())
+    comment = (f"written by tactile-sl calibrate --loads {args.loads} --bag {args.bag}\n"
+               f"RMS force error {fit.rms_error * 100:.2f} % over {len(fit.loads)} loads")
+    written = write_atomically(args.output, {
+        "sensor.yaml": sensor_yaml_text(fit.sensor, comment).encode()})
+    print(f"wrote {written[0]}")
     return 0

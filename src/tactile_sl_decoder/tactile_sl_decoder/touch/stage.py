@@ -100,6 +100,7 @@ class TouchStage:
         self._builder = ReferenceBuilder(self.params.reference_frames, self.shape)
         self._in_contact = False
         self._last: TouchResult | None = None
+        self.last_solve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._index = np.full(self.shape[0] * self.shape[1], -1, np.int64)
 
     # ------------------------------------------------------------------ reference
@@ -168,6 +169,7 @@ class TouchStage:
         valid[k[known]] = True
         t1 = time.perf_counter()
         forces_ref, wrench = self.solver.solve(disp_ref, valid)
+        self.last_solve = (disp_ref, valid, forces_ref)    # per reference cell (calibration)
         t2 = time.perf_counter()
         ref_rows, ref_cols = ref.cells // self.shape[1], ref.cells % self.shape[1]
         wrench_force, wrench_moment = wrench[:3], wrench[3:]

@@ -93,6 +93,7 @@ class TractionSolver:
         s = s.reshape(6, 3 * n)
         fw = scipy.linalg.cho_factor(h + self.params.wrench_weight * eye, check_finite=False)
         self._wrench_rows = scipy.linalg.cho_solve(fw, s.T, check_finite=False).T @ g.T
+        self._g32 = g.astype(np.float32)      # forward model: fit residuals (calibration)
         fm = scipy.linalg.cho_factor(h + self.params.map_weight * eye, check_finite=False)
         self._map = np.ascontiguousarray(
             scipy.linalg.cho_solve(fm, g.T, check_finite=False), dtype=np.float32)
@@ -162,3 +163,10 @@ class TractionSolver:
         for axis in (0, 1):
             forces[keep, axis] += (wrench[axis] - forces[keep, axis].sum()) * weight
         return forces, wrench
+
+    def map_residual(self, disp: np.ndarray, valid: np.ndarray, forces: np.ndarray) -> float:
+        """||G f - u|| / ||u|| over the decoded cells: how well forces explain a field."""
+        pred = (self._g32 @ forces.astype(np.float32).reshape(-1)).reshape(-1, 3)
+        u = np.asarray(disp)[valid]
+        norm = float(np.linalg.norm(u))
+        return float(np.linalg.norm(pred[valid] - u)) / norm if norm > 0 else 0.0
