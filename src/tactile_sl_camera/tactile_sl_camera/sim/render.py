@@ -47,6 +47,26 @@ class Nuisances:
     ink: tuple[float, float, float] = (0.10, 0.09, 0.08)
     shadows: list[dict[str, float]] = field(default_factory=list)  # pad-space soft shadows
     occluders: list[dict[str, Any]] = field(default_factory=list)  # image-space dust/occluders
+    # --- robustness nuisances (docs/camera.md "Nuisances of real sensors"); all off by default
+    see_through: str = ""  # object seen between the glyphs in the contact area: "" (off),
+    # dark | stripes | noise | text
+    object_albedo: float = 0.15  # the touching object's mean albedo (paper 0.92, ink 0.09)
+    object_contrast: float = 0.0  # albedo amplitude of its texture (dark features)
+    object_scale: float = 4e-4  # texture feature size, m (stripe period, blob size, text height)
+    object_depth_fraction: float = 0.5  # contact area: surface moved >= this share of the most
+    jpeg_quality: int = 0  # MJPEG quality 1..100 of both streams; 0 = lossless
+    defocus_px: float = 0.0  # defocus: pillbox (circle of confusion) radius, pixels
+    motion_blur_px: float = 0.0  # motion blur: centred line kernel length, pixels
+    motion_blur_angle_deg: float = 0.0  # its direction in the image (0 = along u)
+    exposure_right: float = 1.0  # right camera's gain relative to the left one
+    exposure_jitter_camera: float = 0.0  # per-frame relative std, independent per camera
+    dropout: float = 0.0  # share of glyphs missing from the print (worn off)
+    wear: float = 0.0  # share of glyphs partly worn (ink beyond a random chord lost)
+    scratches: int = 0  # scratches across the print (ink removed along a line)
+    bubbles: int = 0  # air bubbles under the print (faded disc, dark rim)
+    dust: int = 0  # dark specks on each camera's optics, fixed in the image
+    dust_radius_px: float = 2.5  # their mean radius, pixels
+    dust_strength: float = 0.6  # their mean light loss at the centre (0..1)
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any] | None) -> "Nuisances":
@@ -66,7 +86,37 @@ class Nuisances:
         out = cls(**doc)
         if out.gamma <= 0 or out.exposure < 0 or out.blur_sigma < 0 or out.noise_sigma < 0:
             raise ValueError("gamma must be > 0; exposure, blur_sigma and noise_sigma >= 0")
+        out.check_robustness()
         return out
+
+    def check_robustness(self) -> None:
+        """Range checks of the robustness nuisances (ValueError naming the key)."""
+        if self.see_through not in SEE_THROUGH:
+            raise ValueError(f"see_through must be one of {', '.join(map(repr, SEE_THROUGH))}")
+        checks = {
+            "object_albedo": 0.0 <= self.object_albedo <= 1.0,
+            "object_contrast": 0.0 <= self.object_contrast <= self.object_albedo + 1e-9,
+            "object_scale": self.object_scale > 0,
+            "object_depth_fraction": 0.0 < self.object_depth_fraction <= 1.0,
+            "jpeg_quality": 0 <= int(self.jpeg_quality) <= 100,
+            "defocus_px": self.defocus_px >= 0, "motion_blur_px": self.motion_blur_px >= 0,
+            "exposure_right": self.exposure_right > 0,
+            "exposure_jitter_camera": self.exposure_jitter_camera >= 0,
+            "dropout": 0.0 <= self.dropout < 1.0, "wear": 0.0 <= self.wear <= 1.0,
+            "scratches": int(self.scratches) >= 0, "bubbles": int(self.bubbles) >= 0,
+            "dust": int(self.dust) >= 0, "dust_radius_px": self.dust_radius_px > 0,
+            "dust_strength": 0.0 <= self.dust_strength <= 1.0}
+        bad = [k for k, ok in checks.items() if not ok]
+        if bad:
+            raise ValueError(f"nuisance(s) out of range: {', '.join(bad)} (see docs/camera.md)")
+
+    @property
+    def damages_print(self) -> bool:
+        """Whether the printed artwork is altered (dropout, wear, scratches, bubbles)."""
+        return bool(self.dropout or self.wear or self.scratches or self.bubbles)
+
+
+SEE_THROUGH = ("", "dark", "stripes", "noise", "text")
 
 
 @dataclass
@@ -81,6 +131,7 @@ class GroundTruth:
     px_right: np.ndarray
     visible: np.ndarray  # (N,) bool: visible in both images
     touch: TouchTruth | None = None  # force, contact and displacement truth (load scenes)
+    damaged: np.ndarray | None = None  # (N,) bool: print damaged or dust over it (None: none)
 
     def visible_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(xyz, rows, cols) of the glyphs visible in both images."""
@@ -155,6 +206,67 @@ class _RayTable:
         self.b_ss = b_ss.astype(np.float32)
         self.X0_ss = (cam.C[0] - cam.C[2] * a_ss).astype(np.float32)
         self.Y0_ss = (cam.C[1] - cam.C[2] * b_ss).astype(np.float32)
+
+
+def _pillbox(radius: float) -> np.ndarray:
+    """Normalised disc kernel (circle of confusion) with anti-aliased edge, 8x supersampled."""
+    n = int(np.ceil(radius))
+    fine = (np.arange((2 * n + 1) * 8) + 0.5) / 8.0 - (n + 0.5)
+    yy, xx = np.meshgrid(fine, fine, indexing="ij")
+    inside = (xx * xx + yy * yy <= radius * radius).astype(np.float32)
+    k = inside.reshape(2 * n + 1, 8, 2 * n + 1, 8).mean(axis=(1, 3))
+    return k / k.sum()
+
+
+def _line_kernel(length: float, angle_deg: float) -> np.ndarray:
+    """Normalised centred line kernel (uniform motion during the exposure), bilinear taps."""
+    half = length / 2.0
+    n = int(np.ceil(half)) + 1
+    t = np.linspace(-half, half, max(2, int(np.ceil(length * 4)) + 1))
+    x = n + t * np.cos(np.radians(angle_deg))
+    y = n + t * np.sin(np.radians(angle_deg))
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    k = np.zeros((2 * n + 2, 2 * n + 2), np.float64)
+    for dy, dx, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)),
+                      (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
+        np.add.at(k, (y0 + dy, x0 + dx), w)
+    return (k / k.sum()).astype(np.float32)
+
+
+def _object_pattern(kind: str, shape: tuple[int, int], scale_px: float,
+                    rng: np.random.Generator) -> np.ndarray:
+    """Dark-feature map (0..1) of a touching object's texture, in artwork texture pixels.
+
+    stripes: a grating of period ``scale_px`` at 30 deg; noise: blobs about ``scale_px``
+    across (smoothed white noise above its 80th percentile: glyph-like dark specks); text:
+    rows of random characters ``scale_px`` high; dark: no texture.
+    """
+    h, w = shape
+    if kind == "stripes":
+        ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+        t = (xs * np.float32(np.cos(np.pi / 6)) + ys * np.float32(np.sin(np.pi / 6))) / scale_px
+        return np.clip(0.5 + 2.0 * np.sin(np.float32(2 * np.pi) * t), 0.0, 1.0)
+    if kind == "noise":
+        step = max(scale_px / 2.0, 1.0)
+        small = rng.standard_normal((int(h / step) + 2, int(w / step) + 2)).astype(np.float32)
+        small = cv2.GaussianBlur(small, (0, 0), 0.7)
+        big = cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
+        thr = np.percentile(big, 80)
+        return np.clip((big - thr) / (0.5 * float(big.std()) + 1e-6), 0.0, 1.0)
+    if kind == "text":
+        canvas = np.zeros((h, w), np.uint8)
+        font_scale = scale_px / 22.0  # HERSHEY_SIMPLEX capitals are ~22 units high at scale 1
+        thick = max(1, int(round(scale_px / 8)))
+        letters = np.array(list("ABCDEFGHJKLMNPRSTUVWXYZ0123456789 "))
+        y = scale_px * 1.3
+        while y < h + scale_px:
+            line = "".join(rng.choice(letters, size=int(w / (scale_px * 0.8)) + 2))
+            cv2.putText(canvas, line, (int(-rng.uniform(0, scale_px)), int(y)),
+                        cv2.FONT_HERSHEY_SIMPLEX, font_scale, 255, thick, cv2.LINE_AA)
+            y += scale_px * 1.6
+        return canvas.astype(np.float32) / 255.0
+    return np.zeros(shape, np.float32)
 
 
 class Renderer:
@@ -306,9 +418,160 @@ class Renderer:
             self._cache[key] = self._irradiance(P, n, nz)
         return self._cache[key]
 
+    # ------------------------------------------------------------------ robustness nuisances
+
+    def _cell_index(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per texture pixel: its cell (row * cols + col, -1 off the pattern) and offset.
+
+        The offset from the cell centre is (x, y) in cells: print damage is drawn per pixel
+        from per-cell random values, without a loop over glyphs.
+        """
+        key = ("cells",)
+        if key not in self._cache:
+            art = self.artwork
+            h, w = self._texture.shape
+            sx = -1.0 if art.mirrored else 1.0
+            cf = (np.arange(w, dtype=np.float32) - np.float32(art.cell00_px[0])) / np.float32(
+                sx * art.pitch_px)
+            rf = (np.arange(h, dtype=np.float32) - np.float32(art.cell00_px[1])) / np.float32(
+                art.pitch_px)
+            cc, rr = np.rint(cf).astype(np.int32), np.rint(rf).astype(np.int32)
+            inside = ((rr[:, None] >= 0) & (rr[:, None] < art.rows)
+                      & (cc[None, :] >= 0) & (cc[None, :] < art.cols))
+            cell = np.where(inside, rr[:, None] * art.cols + cc[None, :], -1).astype(np.int32)
+            dx = np.broadcast_to((cf - cc)[None, :], (h, w))
+            dy = np.broadcast_to((rf - rr)[:, None], (h, w))
+            self._cache[key] = (cell, dx, dy)
+        return self._cache[key]
+
+    def print_damage(self, nz: Nuisances, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Damaged artwork texture and, per cell (row-major), whether it is gone or damaged.
+
+        The same for every frame of a seed (the print does not heal).  A cell that keeps
+        less than 20 % of its ink counts as gone (not visible); one whose ink changed by
+        more than 3 % as damaged.
+        """
+        key = ("damage", seed, nz.dropout, nz.wear, nz.scratches, nz.bubbles)
+        if key in self._cache:
+            return self._cache[key]
+        art = self.artwork
+        ncell = art.rows * art.cols
+        rng = np.random.default_rng([int(seed), 104_729])
+        cell, dx, dy = self._cell_index()
+        a = self._texture.copy()
+        valid = cell >= 0
+        cid = np.where(valid, cell, 0)
+        erase = np.zeros(a.shape, bool)
+        if nz.dropout:
+            erase |= valid & (rng.random(ncell) < nz.dropout)[cid]
+        if nz.wear:
+            worn = rng.random(ncell) < nz.wear
+            theta = rng.uniform(0, 2 * np.pi, ncell).astype(np.float32)
+            offset = rng.uniform(-0.05, 0.2, ncell).astype(np.float32)
+            cut = dx * np.cos(theta)[cid] + dy * np.sin(theta)[cid] > offset[cid]
+            erase |= valid & worn[cid] & cut
+        a[erase] = 1.0
+        ppc = float(art.pitch_px)  # texture pixels per cell
+        h, w = a.shape
+        if nz.scratches:
+            m = np.zeros((h, w), np.uint8)
+            c00 = np.asarray(art.cell00_px)
+            for _ in range(int(nz.scratches)):
+                p0 = c00 + rng.uniform(0, 1, 2) * np.array([art.cols - 1, art.rows - 1]) * ppc
+                ang = rng.uniform(0, np.pi)
+                half = rng.uniform(1.5, 5.0) * ppc
+                d = half * np.array([np.cos(ang), np.sin(ang)])
+                width = max(1, int(round(rng.uniform(0.04, 0.08) * ppc)))
+                q0, q1 = np.rint((p0 - d) * 4).astype(int), np.rint((p0 + d) * 4).astype(int)
+                cv2.line(m, (int(q0[0]), int(q0[1])), (int(q1[0]), int(q1[1])), 255, width,
+                         cv2.LINE_AA, shift=2)
+            mf = m.astype(np.float32) / 255.0
+            a = a + (1.0 - a) * mf
+        if nz.bubbles:
+            ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+            c00 = np.asarray(art.cell00_px)
+            for _ in range(int(nz.bubbles)):
+                cx, cy = c00 + rng.uniform(0, 1, 2) * np.array([art.cols - 1, art.rows - 1]) * ppc
+                r = rng.uniform(0.4, 1.2) * ppc
+                y0, y1 = int(max(cy - r - 2, 0)), int(min(cy + r + 3, h))
+                x0, x1 = int(max(cx - r - 2, 0)), int(min(cx + r + 3, w))
+                dist = np.hypot(xs[y0:y1, x0:x1] - cx, ys[y0:y1, x0:x1] - cy)
+                sub = a[y0:y1, x0:x1]
+                inside = np.clip(r - dist + 0.5, 0.0, 1.0)  # faded ink: print lifted off
+                sub = 1.0 - (1.0 - sub) * (1.0 - 0.55 * inside)
+                rim = np.exp(-0.5 * ((dist - r) / (0.06 * r + 0.5)) ** 2)
+                a[y0:y1, x0:x1] = sub * (1.0 - 0.45 * rim)
+        ink0 = np.bincount(cid[valid], (1.0 - self._texture)[valid], ncell)
+        ink1 = np.bincount(cid[valid], (1.0 - a)[valid], ncell)
+        gone = ink1 < 0.2 * ink0
+        damaged = np.abs(ink1 - ink0) > 0.03 * ink0
+        out = (a.astype(np.float32), gone, damaged)
+        self._cache = {k: v for k, v in self._cache.items() if k[0] != "damage"}
+        self._cache[key] = out
+        return out
+
+    def _object_texture(self, nz: Nuisances, seed: int) -> np.ndarray:
+        """Albedo of the touching object in artwork texture pixels (fixed per seed)."""
+        key = ("object", seed, nz.see_through, nz.object_albedo, nz.object_contrast,
+               nz.object_scale)
+        if key not in self._cache:
+            rng = np.random.default_rng([int(seed), 7_919])
+            scale_px = nz.object_scale * abs(self._tex_ay)
+            pattern = _object_pattern(nz.see_through, self._texture.shape, scale_px, rng)
+            self._cache = {k: v for k, v in self._cache.items() if k[0] != "object"}
+            self._cache[key] = (np.float32(nz.object_albedo)
+                                - np.float32(nz.object_contrast) * pattern).astype(np.float32)
+        return self._cache[key]
+
+    def _contact_mask(self, fld: FieldGrid, nz: Nuisances) -> np.ndarray | None:
+        """Contact area (0..1, soft edge) in texture pixels; None without contact.
+
+        It is where the surface moved towards the cameras by at least
+        ``object_depth_fraction`` of the largest displacement (Hertz: half the depth at the
+        contact radius, so 0.5 is the contact disc of a sphere).
+        """
+        depth = -fld.data[:, :, 2]
+        dmax = float(depth.max(initial=0.0))
+        if dmax < 5e-6:
+            return None
+        m = np.clip((depth / dmax - nz.object_depth_fraction) / 0.05 + 0.5, 0.0, 1.0)
+        sp = fld.spacing
+        ax, ay = self._tex_ax, self._tex_ay  # texture pixel -> rest position -> field node
+        M = np.array([[1.0 / (ax * sp), 0.0, -(self._tex_bx / ax + fld.x0) / sp],
+                      [0.0, 1.0 / (ay * sp), -(self._tex_by / ay + fld.y0) / sp]])
+        h, w = self._texture.shape
+        return cv2.warpAffine(m.astype(np.float32), M, (w, h),
+                              flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                              borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+    def dust_specks(self, index: int, nz: Nuisances, seed: int) -> np.ndarray:
+        """(n, 4) u, v, radius, strength of the dust specks on one camera (fixed per seed)."""
+        cam = self.rig.cameras[index]
+        rng = np.random.default_rng([int(seed), 15_485_863, index])
+        n = int(nz.dust)
+        u = rng.uniform(0, cam.width, n)
+        v = rng.uniform(0, cam.height, n)
+        r = nz.dust_radius_px * np.exp(rng.normal(0.0, 0.3, n))
+        k = np.clip(nz.dust_strength * rng.uniform(0.6, 1.4, n), 0.0, 0.98)
+        return np.stack([u, v, r, k], axis=1)
+
+    def _dust_factor(self, index: int, nz: Nuisances, seed: int) -> np.ndarray:
+        """Light transmitted past the dust specks of one camera (h, w)."""
+        key = ("dust", index, seed, nz.dust, nz.dust_radius_px, nz.dust_strength)
+        if key not in self._cache:
+            cam = self.rig.cameras[index]
+            mask = np.zeros((cam.height, cam.width), np.float32)
+            for u, v, r, k in self.dust_specks(index, nz, seed):
+                speck = np.zeros_like(mask)
+                cv2.circle(speck, (int(round(u * 16)), int(round(v * 16))), int(round(r * 16)),
+                           float(k), -1, cv2.LINE_AA, shift=4)
+                np.maximum(mask, speck, out=mask)
+            self._cache[key] = 1.0 - cv2.GaussianBlur(mask, (0, 0), 0.7)
+        return self._cache[key]
+
     def render_camera(self, index: int, fld: FieldGrid, nz: Nuisances, rng: np.random.Generator,
-                      exposure: float, color: bool) -> np.ndarray:
-        """One camera's image (uint8, grey or BGR)."""
+                      exposure: float, color: bool, seed: int = 0) -> np.ndarray:
+        """One camera's image (uint8, grey or BGR); ``seed`` fixes print damage and dust."""
         cam = self.rig.cameras[index]
         table = self._tables[index]
         h, w = cam.height, cam.width
@@ -343,17 +606,35 @@ class Renderer:
             E = E.copy()
             E[win] = cv2.resize(self._irradiance(P, n, nz), (ww, wh),
                                 interpolation=cv2.INTER_LINEAR)
-        albedo = cv2.remap(self._texture, tex_x, tex_y, cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_CONSTANT, borderValue=1.0)
-        if self.ss > 1:
-            albedo = cv2.resize(albedo, (w, h), interpolation=cv2.INTER_AREA)
+        texture = self.print_damage(nz, seed)[0] if nz.damages_print else self._texture
+        mask = self._contact_mask(fld, nz) if nz.see_through else None
+        seen = None
+        if mask is None:
+            albedo = cv2.remap(texture, tex_x, tex_y, cv2.INTER_LINEAR,
+                               borderMode=cv2.BORDER_CONSTANT, borderValue=1.0)
+            if self.ss > 1:
+                albedo = cv2.resize(albedo, (w, h), interpolation=cv2.INTER_AREA)
+        else:
+            # The object replaces the pad's white backdrop between the glyphs in the contact
+            # area: reflectance ink + (paper - ink) a - paper m a + object m a, linear in
+            # (a, m a, object m a), so these three are sampled and anti-aliased together.
+            ma = mask * texture
+            stack = np.dstack([texture, ma, self._object_texture(nz, seed) * ma])
+            tex3 = cv2.remap(stack, tex_x, tex_y, cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_CONSTANT, borderValue=(1.0, 0.0, 0.0))
+            if self.ss > 1:
+                tex3 = cv2.resize(tex3, (w, h), interpolation=cv2.INTER_AREA)
+            albedo, seen = tex3[:, :, 0], tex3[:, :, 1:]
         E = E * self._shadow_factor(X, Y, nz)
         channels = 3 if color else 1
         out = np.empty((h, w, channels), np.float32)
         for c in range(channels):
             ink = nz.ink[c] if color else float(np.mean(nz.ink))
             paper = nz.paper[c] if color else float(np.mean(nz.paper))
-            out[:, :, c] = (ink + (paper - ink) * albedo) * E
+            refl = ink + (paper - ink) * albedo
+            if seen is not None:
+                refl = refl - paper * seen[:, :, 0] + seen[:, :, 1]
+            out[:, :, c] = refl * E
         for occ in nz.occluders:
             if occ.get("camera", "both") not in ("both", cam.name):
                 continue
@@ -363,8 +644,16 @@ class Renderer:
             soft = float(occ.get("softness", 6.0))
             mask = cv2.GaussianBlur(mask, (0, 0), soft) if soft > 0 else mask
             out *= (1.0 - float(occ.get("strength", 0.6)) * mask)[:, :, None]
+        if nz.dust:
+            out *= self._dust_factor(index, nz, seed)[:, :, None]
         if nz.blur_sigma > 0:
             out = cv2.GaussianBlur(out, (0, 0), nz.blur_sigma).reshape(h, w, channels)
+        if nz.defocus_px > 0:
+            out = cv2.filter2D(out, -1, _pillbox(nz.defocus_px),
+                               borderType=cv2.BORDER_REFLECT).reshape(h, w, channels)
+        if nz.motion_blur_px > 0:
+            out = cv2.filter2D(out, -1, _line_kernel(nz.motion_blur_px, nz.motion_blur_angle_deg),
+                               borderType=cv2.BORDER_REFLECT).reshape(h, w, channels)
         if nz.vignetting:
             out *= self._vignette(cam, nz.vignetting)[:, :, None]
         signal = out * np.float32(255.0 * nz.white_level / float(np.mean(nz.paper)) * exposure)
@@ -376,7 +665,11 @@ class Renderer:
         if nz.gamma != 1.0:
             linear = linear ** np.float32(1.0 / nz.gamma)
         img = np.rint(linear * np.float32(255.0)).astype(np.uint8)
-        return img[:, :, 0] if channels == 1 else img
+        img = img[:, :, 0] if channels == 1 else img
+        if nz.jpeg_quality:
+            ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, int(nz.jpeg_quality)])
+            img = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE if channels == 1 else cv2.IMREAD_COLOR)
+        return img
 
     # ------------------------------------------------------------------ ground truth
 
@@ -399,8 +692,12 @@ class Renderer:
         return np.stack([xs, ys], axis=1)
 
     def ground_truth(self, fld: FieldGrid, nz: Nuisances | None = None,
-                     margin_px: float | None = None) -> GroundTruth:
-        """True cell centres on the deformed pad and their visibility in both images."""
+                     margin_px: float | None = None, seed: int = 0) -> GroundTruth:
+        """True cell centres on the deformed pad and their visibility in both images.
+
+        With print damage, glyphs worn off are not visible and damaged ones (or ones under a
+        dust speck) are flagged in :attr:`GroundTruth.damaged`.
+        """
         rows, cols, X, Y = self.cell_rest_positions()
         u = fld.sample(X, Y)
         world = np.stack([X + u[:, 0], Y + u[:, 1], u[:, 2]], axis=1)
@@ -431,7 +728,23 @@ class Renderer:
             visible &= ok
             pxs.append(px)
         xyz = self.rig.world_to_left(world)
-        return GroundTruth(rows, cols, xyz, world, pxs[0], pxs[1], visible)
+        damaged = None
+        if nz is not None and (nz.damages_print or nz.dust):
+            damaged = np.zeros(len(rows), bool)
+            if nz.damages_print:
+                _tex, gone, bad = self.print_damage(nz, seed)
+                visible &= ~gone
+                damaged |= bad
+            if nz.dust:
+                spacing = self.pitch * self.rig.pixels_per_metre_at_pad()
+                for index, px in enumerate(pxs):
+                    specks = self.dust_specks(index, nz, seed)
+                    specks = specks[specks[:, 3] > 0.15]
+                    if len(specks):
+                        d = np.hypot(px[:, None, 0] - specks[None, :, 0],
+                                     px[:, None, 1] - specks[None, :, 1])
+                        damaged |= (d < specks[None, :, 2] + 0.4 * spacing).any(axis=1)
+        return GroundTruth(rows, cols, xyz, world, pxs[0], pxs[1], visible, damaged=damaged)
 
     # ------------------------------------------------------------------ frames
 
@@ -458,9 +771,16 @@ class Renderer:
         exposure = nz.exposure * (1.0 + nz.exposure_jitter * float(rng.standard_normal())) \
             if nz.exposure_jitter else nz.exposure
         exposure = max(exposure, 0.0)
-        left = self.render_camera(0, fld, nz, rng, exposure, color)
-        right = self.render_camera(1, fld, nz, rng, exposure, color)
-        truth = self.ground_truth(fld, nz)
+        exp_l = exp_r = exposure
+        if nz.exposure_right != 1.0 or nz.exposure_jitter_camera:
+            # own stream, so scenes without these keep their exact noise
+            j = nz.exposure_jitter_camera * np.random.default_rng(
+                [int(seed), int(frame_index), 2]).standard_normal(2)
+            exp_l = max(exposure * (1.0 + float(j[0])), 0.0)
+            exp_r = max(exposure * nz.exposure_right * (1.0 + float(j[1])), 0.0)
+        left = self.render_camera(0, fld, nz, rng, exp_l, color, seed)
+        right = self.render_camera(1, fld, nz, rng, exp_r, color, seed)
+        truth = self.ground_truth(fld, nz, seed=seed)
         if any(is_load(c) for c in contacts):
             truth.touch = self.touch_truth(contacts, fld, truth)
         return StereoFrame(left, right, truth, fld)

@@ -1,0 +1,280 @@
+#!/usr/bin/env python3
+"""Robustness sweep: every simulator nuisance at three levels, and all of them at once.
+
+    python tools/bench_sweep.py                  # full sweep, table into docs/robustness.md
+    python tools/bench_sweep.py --only jpeg dust --no-write
+    python tools/bench_sweep.py --json out.json
+
+Each row renders the same few stereo frames (contacts of several shapes, so the touching
+object is seen through the pad) with one nuisance at its mild, realistic or severe level
+(``LEVELS``, ranges in docs/camera.md), runs them through the shared
+:class:`~tactile_sl_decoder.pipeline.StereoPipeline` in process (the node's and the
+replay's code) and compares the points with the renderer's ground truth:
+
+* coverage: visible *undamaged* glyphs (not worn, scratched, under a bubble or a dust
+  speck) decoded to their cell and triangulated within half a pitch of the truth;
+* wrong: output points at a wrong cell, or farther than half a pitch from their cell's
+  true centre (e2e_metrics' definition), among all output points, damaged glyphs included;
+* RMSE: 3-D error of the correct points of undamaged glyphs.
+
+Figures, not pass/fail; the acceptance limits of issue 11 are printed next to them.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import pathlib
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+REPO = pathlib.Path(__file__).resolve().parents[1]
+DOC = REPO / "docs" / "robustness.md"
+BEGIN, END = "<!-- sweep:begin -->", "<!-- sweep:end -->"
+BASE_FOCAL = (540.0, 538.0)   # RigParams default: 18 px glyph spacing at 15 mm
+OBJECTS = ("dark", "stripes", "noise", "text")
+
+# nuisance -> (mild, realistic, severe) scene nuisances; "rig_spacing" scales the focal
+# lengths to that glyph spacing in pixels (RigParams default 18 px).
+LEVELS: dict[str, tuple[dict[str, Any], dict[str, Any], dict[str, Any]]] = {
+    "object_dark": tuple({"see_through": "dark", "object_albedo": a} for a in (0.35, 0.2, 0.1)),
+    "object_stripes": tuple({"see_through": "stripes", "object_albedo": 0.6,
+                             "object_contrast": c, "object_scale": s}
+                            for c, s in ((0.2, 5e-4), (0.4, 4e-4), (0.55, 3e-4))),
+    "object_noise": tuple({"see_through": "noise", "object_albedo": 0.7, "object_contrast": c,
+                           "object_scale": 2.5e-4} for c in (0.2, 0.4, 0.65)),
+    "object_text": tuple({"see_through": "text", "object_albedo": 0.7, "object_contrast": c,
+                          "object_scale": s}
+                         for c, s in ((0.2, 4e-4), (0.4, 3.5e-4), (0.65, 3e-4))),
+    "jpeg": tuple({"jpeg_quality": q} for q in (90, 70, 50)),
+    "defocus": tuple({"defocus_px": r} for r in (1.0, 1.5, 2.5)),
+    "motion_blur": tuple({"motion_blur_px": n, "motion_blur_angle_deg": 30.0}
+                         for n in (2.0, 4.0, 8.0)),
+    "exposure": tuple({"exposure_right": r, "exposure_jitter_camera": j}
+                      for r, j in ((0.9, 0.05), (0.75, 0.1), (0.55, 0.2))),
+    "dropout": tuple({"dropout": p} for p in (0.01, 0.03, 0.08)),
+    "wear": tuple({"wear": p} for p in (0.02, 0.05, 0.15)),
+    "scratches": tuple({"scratches": n} for n in (2, 5, 12)),
+    "bubbles": tuple({"bubbles": n} for n in (1, 3, 8)),
+    "dust": tuple({"dust": n, "dust_radius_px": r, "dust_strength": k}
+                  for n, r, k in ((10, 1.5, 0.4), (25, 2.5, 0.6), (60, 3.5, 0.8))),
+    "spacing_small": tuple({"rig_spacing": s} for s in (16.0, 14.0, 12.0)),
+    "spacing_large": tuple({"rig_spacing": s} for s in (20.0, 22.0, 24.0)),
+    "lighting": (
+        {"blur_sigma": 0.8, "noise_sigma": 2.0, "shot_noise": 0.05, "vignetting": 0.3,
+         "illumination_gradient": (0.03, -0.02), "ambient": 0.3, "gamma": 1.3,
+         "exposure_jitter": 0.05,
+         "shadows": [{"x": -0.004, "y": 0.003, "radius": 0.0025, "strength": 0.3,
+                      "softness": 0.0015}]},
+        {"blur_sigma": 1.3, "noise_sigma": 4.0, "shot_noise": 0.15, "vignetting": 0.45,
+         "illumination_gradient": (0.06, -0.04), "light": (0.004, -0.007, -0.011),
+         "ambient": 0.25, "gamma": 1.8, "exposure": 0.8, "exposure_jitter": 0.12,
+         "shadows": [{"x": -0.004, "y": 0.003, "radius": 0.0025, "strength": 0.45,
+                      "softness": 0.0015}],
+         "occluders": [{"u": 520, "v": 90, "radius": 22, "strength": 0.5, "softness": 8,
+                        "camera": "left"}]},
+        {"blur_sigma": 1.6, "noise_sigma": 6.0, "shot_noise": 0.25, "vignetting": 0.6,
+         "illumination_gradient": (0.1, -0.07), "light": (0.005, -0.006, -0.009),
+         "ambient": 0.15, "gamma": 2.2, "exposure": 0.7, "exposure_jitter": 0.2,
+         "shadows": [{"x": -0.004, "y": 0.003, "radius": 0.0025, "strength": 0.6,
+                      "softness": 0.001}],
+         "occluders": [{"u": 520, "v": 90, "radius": 22, "strength": 0.6, "softness": 8,
+                        "camera": "left"}]}),
+}
+LEVEL_NAMES = ("mild", "realistic", "severe")
+COMBINED_SKIP = ("spacing_large",)    # combined: the smaller (harder) spacing only
+ACCEPT = {"realistic": (0.97, 0.0005, 1.0e-5), "severe": (None, 0.001, None)}
+
+
+def frame_contacts(index: int) -> list[Any]:
+    """Contacts of sweep frame ``index`` (each frame its own shape and contact area).
+
+    Sphere; small, deep, sheared sphere; flat punch + cylinder; rounded edge.
+    """
+    from tactile_sl_camera.sim.contact import Contact
+
+    shapes = [
+        [Contact(kind="sphere", radius=0.004, x=0.0003, y=-0.0002, depth=0.0005)],
+        [Contact(kind="sphere", radius=0.002, x=0.0012, y=-0.0008, depth=0.0008,
+                 shear=(0.0001, 0.0))],
+        [Contact(kind="flat", radius=0.0015, x=-0.002, y=0.001, depth=0.0003),
+         Contact(kind="cylinder", radius=0.003, length=0.004, x=0.0025, y=-0.0015,
+                 depth=0.0004, angle=float(np.radians(20.0)))],
+        [Contact(kind="edge", radius=0.0008, x=0.0, y=0.0, depth=0.0004,
+                 angle=float(np.radians(30.0)))],
+    ]
+    return shapes[index % len(shapes)]
+
+
+def level_nuisances(names: list[str], level: int, frame: int) -> tuple[dict[str, Any], float]:
+    """Merged nuisance mapping of some sweep rows at a level, and the glyph spacing (px)."""
+    nz: dict[str, Any] = {}
+    spacing = 18.0
+    for name in names:
+        doc = copy.deepcopy(LEVELS[name][level])
+        spacing = float(doc.pop("rig_spacing", spacing))
+        if doc.get("see_through") and len(names) > 1:   # combined: one object per frame
+            kind = OBJECTS[frame % len(OBJECTS)]
+            if name != f"object_{kind}":
+                continue
+        nz.update(doc)
+    return nz, spacing
+
+
+@dataclass
+class RowFigures:
+    """Pooled counts of one sweep row."""
+
+    visible: int = 0
+    correct: int = 0
+    points: int = 0
+    wrong: int = 0
+    errors: list[np.ndarray] = field(default_factory=list)
+    ms: list[float] = field(default_factory=list)
+
+    def summary(self) -> dict[str, float]:
+        err = np.concatenate(self.errors) if self.errors else np.zeros(0)
+        return {"visible": self.visible, "points": self.points, "correct": self.correct,
+                "wrong": self.wrong,
+                "coverage": self.correct / self.visible if self.visible else float("nan"),
+                "wrong_rate": self.wrong / self.points if self.points else 0.0,
+                "rmse_m": float(np.sqrt(np.mean(err ** 2))) if len(err) else float("nan"),
+                "ms": float(np.median(self.ms)) if self.ms else float("nan")}
+
+
+class Sweep:
+    """Renderers per glyph spacing, one pipeline, the ground-truth comparison."""
+
+    def __init__(self, frames: int, seed: int) -> None:
+        from tactile_sl_camera.sim.artwork import load_artwork
+        from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+
+        self.frames, self.seed = frames, seed
+        self.artwork = load_artwork()
+        self.pattern = PatternSpec.load()
+        self.pipeline = StereoPipeline(self.pattern, params=PipelineParams(threads=1))
+        self._renderers: dict[float, Any] = {}
+
+    def renderer(self, spacing: float) -> Any:
+        from tactile_sl_camera.sim.optics import RigParams, StereoRig
+        from tactile_sl_camera.sim.render import Renderer
+
+        if spacing not in self._renderers:
+            f = spacing / 18.0
+            rig = RigParams(focal=(BASE_FOCAL[0] * f, BASE_FOCAL[1] * f))
+            self._renderers[spacing] = Renderer(self.artwork, StereoRig(rig))
+        return self._renderers[spacing]
+
+    def run_row(self, names: list[str], level: int) -> RowFigures:
+        from tactile_sl_camera.clouds import pack_points
+        from tactile_sl_camera.sim.render import Nuisances
+        from tactile_sl_decoder.e2e_metrics import frame_metrics
+        from tactile_sl_decoder.stereo import StereoRig as DecoderRig
+
+        out = RowFigures()
+        for frame in range(self.frames):
+            doc, spacing = level_nuisances(names, level, frame)
+            nz = Nuisances.from_dict({"blur_sigma": 0.5, "noise_sigma": 0.8, "shot_noise": 0.02,
+                                      "vignetting": 0.2, **doc})
+            renderer = self.renderer(spacing)
+            seed = self.seed + 101 * level + frame
+            f = renderer.render(frame_contacts(frame), nz, seed=seed, frame_index=frame)
+            rig = DecoderRig(renderer.rig.left_info, renderer.rig.right_info)
+            t0 = time.perf_counter()
+            res = self.pipeline.process(f.left, f.right, rig, rig)
+            out.ms.append(1e3 * (time.perf_counter() - t0))
+            t = f.truth
+            vis = t.visible
+            undamaged = vis & ~t.damaged if t.damaged is not None else vis
+            tol = 0.5 * self.pattern.pitch_m
+            all_gt = pack_points(t.xyz[vis], t.rows[vis], t.cols[vis])
+            fm_all = frame_metrics(res.points, all_gt, tol)
+            out.points += fm_all.points
+            out.wrong += fm_all.wrong
+            und_gt = pack_points(t.xyz[undamaged], t.rows[undamaged], t.cols[undamaged])
+            cells = t.rows * self.artwork.cols + t.cols
+            bad_cells = cells[vis & ~undamaged]
+            pts = res.points
+            keep = ~np.isin(pts["row"].astype(np.int64) * self.artwork.cols + pts["col"],
+                            bad_cells)
+            fm = frame_metrics(pts[keep], und_gt, tol)
+            out.visible += fm.visible
+            out.correct += fm.correct
+            out.errors.append(fm.errors_m)
+        return out
+
+
+def table(results: list[tuple[str, str, dict[str, float]]]) -> str:
+    """Markdown table of the sweep rows."""
+    lines = ["| nuisance | level | visible | coverage | wrong | wrong % | 3-D RMSE | ms/pair |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, level, s in results:
+        limits = ACCEPT.get(level)
+        flag = ""
+        if limits:
+            cov, wrong, rmse = limits
+            fails = ((cov is not None and not s["coverage"] >= cov)
+                     or (wrong is not None and s["wrong_rate"] > wrong)
+                     or (rmse is not None and not s["rmse_m"] <= rmse))
+            flag = " **(fails)**" if fails else ""
+        lines.append(f"| {name} | {level}{flag} | {s['visible']} | {100 * s['coverage']:.2f} % "
+                     f"| {s['wrong']} | {100 * s['wrong_rate']:.3f} % "
+                     f"| {1e3 * s['rmse_m']:.4f} mm | {s['ms']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_doc(text: str, path: pathlib.Path = DOC) -> None:
+    """Replace the generated section of docs/robustness.md (markers kept)."""
+    doc = path.read_text() if path.exists() else f"# Robustness\n\n{BEGIN}\n{END}\n"
+    if BEGIN not in doc or END not in doc:
+        doc = doc.rstrip() + f"\n\n{BEGIN}\n{END}\n"
+    head, rest = doc.split(BEGIN, 1)
+    _old, tail = rest.split(END, 1)
+    path.write_text(f"{head}{BEGIN}\n{text}{END}{tail}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--only", nargs="*", default=None, help="nuisances (and/or 'combined')")
+    ap.add_argument("--levels", nargs="*", default=list(LEVEL_NAMES), choices=LEVEL_NAMES)
+    ap.add_argument("--frames", type=int, default=4, help="stereo frames per row")
+    ap.add_argument("--seed", type=int, default=5)
+    ap.add_argument("--no-write", action="store_true", help="do not update docs/robustness.md")
+    ap.add_argument("--json", default=None, help="also write the figures as JSON")
+    args = ap.parse_args(argv)
+    rows = list(LEVELS) + ["combined"]
+    if args.only:
+        unknown = sorted(set(args.only) - set(rows))
+        if unknown:
+            ap.error(f"unknown nuisance(s) {', '.join(unknown)}; known: {', '.join(rows)}")
+        rows = [r for r in rows if r in args.only]
+    sweep = Sweep(args.frames, args.seed)
+    results: list[tuple[str, str, dict[str, float]]] = []
+    t0 = time.time()
+    for name in rows:
+        names = [n for n in LEVELS if n not in COMBINED_SKIP] if name == "combined" else [name]
+        for level_name in args.levels:
+            s = sweep.run_row(names, LEVEL_NAMES.index(level_name)).summary()
+            results.append((name, level_name, s))
+            print(f"{name:15s} {level_name:9s} coverage {100 * s['coverage']:6.2f} %  "
+                  f"wrong {s['wrong']:3d} ({100 * s['wrong_rate']:.3f} %)  "
+                  f"rmse {1e3 * s['rmse_m']:.4f} mm", file=sys.stderr, flush=True)
+    text = table(results)
+    print(text)
+    print(f"({len(results)} rows, {args.frames} stereo frames each, {time.time() - t0:.0f} s)",
+          file=sys.stderr)
+    if not args.no_write:
+        write_doc(text)
+    if args.json:
+        pathlib.Path(args.json).write_text(json.dumps(
+            [{"nuisance": n, "level": lv, **s} for n, lv, s in results], indent=1))
+    sweep.pipeline.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
