@@ -9,18 +9,27 @@ Foxglove and the ``mcap`` / ``rosbags`` readers open what we write, and we open 
 Messages are written from plain objects or dicts (``mcap_ros2``'s dynamic CDR encoder) and
 read back as raw CDR bytes (for replay, published as they are) or decoded objects whose
 attributes mirror the ROS message fields.
+
+Integrity: every chunk is written with the CRC of its uncompressed records (and the data
+section with its own CRC); readers verify chunk CRCs wherever a bag has them, so flipped
+bytes in a message payload are an error naming the file, not a wrong cell later.  A bag
+is written to a temporary file in the target directory and renamed over the target only
+when it is closed without an error, so a failed or interrupted run never leaves a stub.
 """
 from __future__ import annotations
 
 import os
 import pathlib
 import struct
+import sys
+import tempfile
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Schema
+from mcap.records import Chunk, Schema
+from mcap.stream_reader import CRCValidationError, StreamReader, get_chunk_data_stream
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import DecoderFunction, EncoderFunction, generate_dynamic, serialize_dynamic
@@ -137,17 +146,28 @@ def message_definition(schema_name: str) -> str:
 
 
 class BagWriter:
-    """Write a rosbag2-compatible MCAP file (``with BagWriter(path) as bag: bag.write(...)``)."""
+    """Write a rosbag2-compatible MCAP file (``with BagWriter(path) as bag: bag.write(...)``).
+
+    The bag goes to a temporary file next to ``path``; :meth:`close` renames it onto
+    ``path``, :meth:`abort` (and leaving the ``with`` block by an exception) removes it.
+    """
 
     def __init__(self, path: str | os.PathLike, compression: str = "zstd") -> None:
         self.path = pathlib.Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "wb")
         kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
                  "none": CompressionType.NONE}
         if compression not in kinds:
             raise BagError(f"{self.path}: unknown compression {compression!r}")
-        self._writer = McapWriter(self._file, compression=kinds[compression], enable_crcs=True)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp",
+                                       dir=self.path.parent)
+        except OSError as exc:
+            raise BagError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        self._tmp = pathlib.Path(tmp)
+        self._file = os.fdopen(fd, "wb")
+        self._writer = McapWriter(self._file, compression=kinds[compression], enable_crcs=True,
+                                  enable_data_crcs=True)
         self._writer.start(profile="ros2", library="tactile-sl")
         self._schemas: dict[str, tuple[int, EncoderFunction]] = {}
         self._channels: dict[str, int] = {}
@@ -188,16 +208,47 @@ class BagWriter:
                                  sequence=self._sequence[topic], data=bytes(cdr))
 
     def close(self) -> None:
+        """Finish the file and move it onto the target path."""
         if not self._closed:
-            self._writer.finish()
-            self._file.close()
             self._closed = True
+            try:
+                self._writer.finish()
+                self._file.close()
+                umask = os.umask(0)
+                os.umask(umask)
+                os.chmod(self._tmp, 0o666 & ~umask)
+                os.replace(self._tmp, self.path)
+            except OSError as exc:
+                self._discard()
+                raise BagError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+            except BaseException:
+                self._discard()
+                raise
+
+    def abort(self) -> None:
+        """Drop what was written; the target path is left as it was."""
+        if not self._closed:
+            self._closed = True
+            self._discard()
+
+    def _discard(self) -> None:
+        try:
+            self._file.close()
+        except (OSError, ValueError):
+            pass
+        try:
+            self._tmp.unlink()
+        except OSError:
+            pass
 
     def __enter__(self) -> "BagWriter":
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 # --------------------------------------------------------------------------- reading
@@ -276,14 +327,36 @@ class BagReader:
         wanted = set(topics) if topics is not None else None
         try:
             with open(self.path, "rb") as f:
-                reader = make_reader(f)
+                reader = make_reader(f, validate_crcs=True)
                 for schema, channel, message in reader.iter_messages(
                         topics=list(wanted) if wanted is not None else None,
                         log_time_order=True):
                     yield RawMessage(channel.topic, schema.name if schema else "",
                                      message.log_time, message.publish_time, message.data)
+        except CRCValidationError as exc:
+            raise BagError(f"{self.path}: corrupt MCAP data: a chunk fails its CRC check "
+                           f"({exc})") from exc
         except (McapError, struct.error, ValueError, EOFError) as exc:
             raise BagError(f"{self.path}: corrupt MCAP data ({exc})") from exc
+
+    def verify(self) -> int:
+        """Check every chunk against its CRC (where the bag has one); returns chunks checked.
+
+        Raises :class:`BagError` naming the file and the chunk's offset on a mismatch.
+        """
+        checked = 0
+        try:
+            with open(self.path, "rb") as f:
+                for record in StreamReader(f, skip_magic=False, emit_chunks=True).records:
+                    if isinstance(record, Chunk):
+                        get_chunk_data_stream(record, validate_crc=True)
+                        checked += int(record.uncompressed_crc != 0)
+        except CRCValidationError as exc:
+            raise BagError(f"{self.path}: corrupt MCAP data: a chunk fails its CRC check "
+                           f"({exc})") from exc
+        except (McapError, struct.error, ValueError, EOFError) as exc:
+            raise BagError(f"{self.path}: corrupt MCAP data ({exc})") from exc
+        return checked
 
     def decoder(self, schema: Schema) -> DecoderFunction:
         if schema.id not in self._decoders:
@@ -294,16 +367,27 @@ class BagReader:
                 schema.name]
         return self._decoders[schema.id]
 
-    def messages(self, topics: Iterable[str] | None = None) -> Iterator[tuple[RawMessage, Any]]:
-        """Messages in log-time order, each with its decoded form."""
+    def messages(self, topics: Iterable[str] | None = None,
+                 strict: bool = False) -> Iterator[tuple[RawMessage, Any]]:
+        """Messages in log-time order, each with its decoded form.
+
+        A message that cannot be deserialised is skipped with a warning on stderr naming
+        its topic and time (its stereo frame is then incomplete and left out);
+        ``strict=True`` raises :class:`BagError` instead.
+        """
         by_name = {s.name: s for s in self._summary.schemas.values()}
         for raw in self.raw_messages(topics):
             decode = self.decoder(by_name[raw.schema_name])
             try:
                 decoded = decode(raw.data)
             except Exception as exc:  # the dynamic decoder raises assorted errors on bad CDR
-                raise BagError(f"{self.path}: cannot decode a {raw.schema_name} message on "
-                               f"{raw.topic} at {raw.log_time_ns} ns ({exc})") from exc
+                text = (f"{self.path}: cannot decode a {raw.schema_name} message on "
+                        f"{raw.topic} at {raw.log_time_ns // 1_000_000_000}."
+                        f"{raw.log_time_ns % 1_000_000_000:09d} s ({exc})")
+                if strict:
+                    raise BagError(text) from exc
+                print(f"warning: {text}; message skipped", file=sys.stderr)
+                continue
             yield raw, decoded
 
 

@@ -53,6 +53,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        return 1
+    except (OSError, MemoryError) as exc:     # last resort: one line, never a traceback
+        text = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+        where = f" {exc.filename}:" if getattr(exc, "filename", None) else ""
+        print(f"tactile-sl {args.command}:{where} {text}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -28,11 +28,22 @@ def register(subparsers: Any) -> None:
     p.add_argument("--weights", type=Path, default=None,
                    help="classifier weights (default: shipped)")
     p.add_argument("--namespace", default="/tactile", help="topic namespace in the bags")
-    p.add_argument("--max-frames", type=int, default=0, help="frames per bag (0 = all)")
+    p.add_argument("--max-frames", type=_non_negative_int, default=0,
+                   help="frames per bag (0 = all)")
     p.add_argument("--totals-only", action="store_true",
                    help="print one row per scene instead of one per image")
     p.add_argument("--json", type=Path, default=None, help="also write every figure as JSON")
     p.set_defaults(func=run)
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
 
 
 def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
@@ -110,8 +121,10 @@ def symbol_sections(args: argparse.Namespace, bags: list[Path]) -> str:
         for t in totals + [overall]:
             out.append(format_confusion(confusion_section(t, names)))
     if args.json:
-        args.json.write_text(json.dumps({"images": to_json(all_rows),
-                                         "scenes": to_json(totals)}, indent=1))
+        from tactile_sl_camera.safe_files import write_text
+
+        write_text(args.json, json.dumps({"images": to_json(all_rows),
+                                          "scenes": to_json(totals)}, indent=1))
     return "\n".join(out)
 
 
@@ -140,6 +153,14 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         print(f"evaluate: no such bag: {', '.join(missing)}", file=sys.stderr)
         return 2
+    if args.json:     # before any work: an output that cannot be written is said at once
+        from tactile_sl_camera.safe_files import OutputError, check_output
+
+        try:
+            check_output(args.json, args.bags)
+        except OutputError as exc:
+            print(f"evaluate: {exc}", file=sys.stderr)
+            return 2
     for section in SECTIONS:
         print(section(args, list(args.bags)))
     return 0

@@ -2,9 +2,14 @@
 from __future__ import annotations
 
 import argparse
+import math
+import os
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
+
+from tactile_sl_camera.safe_files import OutputError, check_output, write_text
 
 from ..pattern import (
     Constraints,
@@ -20,6 +25,22 @@ from ..pattern.fileio import DEFAULT_PITCH_M
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_USAGE = 2
+
+# Largest PNG `pattern render` draws (output pixels; rendering supersamples each one).
+MAX_RENDER_PIXELS = 60_000_000
+
+
+def _number(kind: type, low: float, high: float, what: str) -> Any:
+    """Build an argparse type: a ``kind`` number in [low, high]."""
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {kind.__name__}") from None
+        if not (low <= value <= high) or (kind is float and not math.isfinite(value)):
+            raise argparse.ArgumentTypeError(f"{what} must be in [{low}, {high}], got {text}")
+        return value
+    return parse
 
 
 def _shape(text: str) -> tuple[int, int]:
@@ -63,6 +84,13 @@ def cmd_generate(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     rows, cols = args.size
+    try:     # before the search: an output that cannot be written is said at once
+        check_output(args.output)
+        if args.certificate:
+            check_output(args.certificate)
+    except OutputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
     try:
         result = generate(args.algorithm, constraints, rows, cols, seed=args.seed,
                           time_limit=args.time_limit, progress=not args.quiet, tidy=args.tidy)
@@ -81,9 +109,13 @@ def cmd_generate(args: argparse.Namespace) -> int:
         print(cert.text(), file=sys.stderr)
         print("error: generated array failed verification; not written", file=sys.stderr)
         return EXIT_FAILED
-    save_pattern(pattern, args.output)
-    if args.certificate:
-        Path(args.certificate).write_text(cert.text(), encoding="utf-8")
+    try:
+        save_pattern(pattern, args.output)
+        if args.certificate:
+            write_text(args.certificate, cert.text())
+    except OSError as exc:
+        print(f"error: cannot write {args.output}: {exc}", file=sys.stderr)
+        return EXIT_FAILED
     print(f"wrote {args.output}: {rows}x{cols}, {cert.windows} windows, minimum distance "
           f"{cert.min_distance} ({args.algorithm}, seed {args.seed}, {result.seconds:.2f} s)",
           file=sys.stderr)
@@ -93,7 +125,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
 def cmd_verify(args: argparse.Namespace) -> int:
     """Print the certificate; exit 1 if the pattern breaks its constraints, 2 if unreadable."""
     try:
-        pattern = load_pattern(args.file)
+        pattern = load_pattern(args.file, verify=False)
     except PatternFormatError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -102,7 +134,12 @@ def cmd_verify(args: argparse.Namespace) -> int:
     if not args.quiet:
         sys.stdout.write(text)
     if args.certificate:
-        Path(args.certificate).write_text(text, encoding="utf-8")
+        try:
+            check_output(args.certificate, [args.file])
+            write_text(args.certificate, text)
+        except OSError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_USAGE
     if not cert.valid:
         print(f"error: {args.file} is INVALID: {'; '.join(cert.problems)}", file=sys.stderr)
         return EXIT_FAILED
@@ -120,23 +157,60 @@ def cmd_render(args: argparse.Namespace) -> int:
         print("error: --png needs exactly one of --dpi D or --pitch-px P", file=sys.stderr)
         return EXIT_USAGE
     try:
-        pattern = load_pattern(args.file)
-    except PatternFormatError as exc:
+        pattern = load_pattern(args.file, verify=not args.allow_invalid_pattern)
+        for out in (args.svg, args.png):
+            if out:
+                check_output(out, [args.file])
+    except (PatternFormatError, OutputError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    if args.png:
+        pitch_px = (args.pitch_px if args.pitch_px is not None
+                    else pattern.pitch_m * 1000.0 / 25.4 * args.dpi)
+        width = math.ceil((pattern.cols - 1 + 2 * args.margin + 1) * pitch_px)
+        height = math.ceil((pattern.rows - 1 + 2 * args.margin + 1) * pitch_px)
+        if width * height > MAX_RENDER_PIXELS:
+            print(f"error: the PNG would be about {width} x {height} px "
+                  f"({width * height / 1e6:.0f} Mpx, limit {MAX_RENDER_PIXELS / 1e6:.0f} Mpx); "
+                  "lower --dpi / --pitch-px or use --svg", file=sys.stderr)
+            return EXIT_USAGE
     try:
         if args.svg:
-            render_svg(pattern, args.svg, margin_pitch=args.margin)
+            _render_atomic(args.svg, lambda path: render_svg(pattern, path,
+                                                             margin_pitch=args.margin))
             print(f"wrote {args.svg}", file=sys.stderr)
         if args.png:
-            side = render_png(pattern, args.png, dpi=args.dpi, pitch_px=args.pitch_px,
-                              margin_pitch=args.margin)
+            side = _render_atomic(args.png, lambda path: render_png(
+                pattern, path, dpi=args.dpi, pitch_px=args.pitch_px, margin_pitch=args.margin),
+                sidecar=True)
             print(f"wrote {args.png} ({side['width_px']}x{side['height_px']} px, "
                   f"{side['pitch_px']:.2f} px per pitch) and {args.png}.yaml", file=sys.stderr)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except (OSError, MemoryError) as exc:
+        print(f"error: cannot render {args.svg or args.png}: "
+              f"{getattr(exc, 'strerror', None) or exc or type(exc).__name__}", file=sys.stderr)
+        return EXIT_FAILED
     return EXIT_OK
+
+
+def _render_atomic(target: str, draw: Any, sidecar: bool = False) -> Any:
+    """Draw into a temporary folder beside ``target``, then rename (with its sidecar)."""
+    out = Path(target)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent if str(out.parent)
+                                else "."))
+    staged = tmp / out.name
+    try:
+        result = draw(staged)
+        if sidecar:
+            os.replace(str(staged) + ".yaml", str(out) + ".yaml")
+        os.replace(staged, out)
+        return result
+    finally:
+        for leftover in tmp.iterdir():
+            leftover.unlink()
+        tmp.rmdir()
 
 
 def cmd_bound(args: argparse.Namespace) -> int:
@@ -160,7 +234,7 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
                           algorithms=args.algorithms, rows_filter=args.only,
                           progress=not args.quiet)
     if args.output:
-        Path(args.output).write_text(table, encoding="utf-8")
+        write_text(args.output, table)
         print(f"wrote {args.output}", file=sys.stderr)
     else:
         sys.stdout.write(table)
@@ -189,14 +263,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      help="array rows x cols")
     gen.add_argument("--algorithm", choices=names, default=names[0], metavar="NAME",
                      help=f"generator (default {names[0]}): {algo_help}")
-    gen.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    gen.add_argument("--time-limit", type=float, default=60.0, metavar="SECONDS",
+    gen.add_argument("--seed", type=_number(int, 0, 2**32 - 1, "--seed"), default=0,
+                     help="random seed (default 0)")
+    gen.add_argument("--time-limit", type=_number(float, 0.001, 1e6, "--time-limit"),
+                     default=60.0, metavar="SECONDS",
                      help="time budget (default 60)")
     gen.add_argument("--tidy", action="store_true",
                      help="auto/linear only: among offsets of the fold found, keep the one with "
                           "the fewest constant or repeated lines and draw a constant line with "
                           "value 1 (circles); still verified")
-    gen.add_argument("--pitch-m", type=float, default=DEFAULT_PITCH_M,
+    gen.add_argument("--pitch-m", type=_number(float, 1e-6, 0.1, "--pitch-m"),
+                     default=DEFAULT_PITCH_M,
                      help=f"symbol pitch in metres written to the file (default {DEFAULT_PITCH_M})")
     gen.add_argument("-o", "--output", required=True, metavar="FILE.yaml")
     gen.add_argument("--certificate", metavar="FILE.txt", help="also write the certificate")
@@ -213,11 +290,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ren.add_argument("file", metavar="FILE.yaml")
     ren.add_argument("--svg", metavar="OUT.svg")
     ren.add_argument("--png", metavar="OUT.png")
-    ren.add_argument("--dpi", type=float, metavar="D", help="PNG resolution (dots per inch)")
-    ren.add_argument("--pitch-px", type=float, metavar="P",
+    ren.add_argument("--dpi", type=_number(float, 1.0, 1e6, "--dpi"), metavar="D",
+                     help="PNG resolution (dots per inch)")
+    ren.add_argument("--pitch-px", type=_number(float, 1.0, 1e5, "--pitch-px"), metavar="P",
                      help="PNG resolution as pixels per pitch instead of --dpi")
-    ren.add_argument("--margin", type=float, default=1.5, metavar="PITCHES",
+    ren.add_argument("--margin", type=_number(float, 0.0, 100.0, "--margin"), default=1.5,
+                     metavar="PITCHES",
                      help="margin around the outer cell centres, in pitches (default 1.5)")
+    ren.add_argument("--allow-invalid-pattern", action="store_true",
+                     help="draw a pattern that breaks its own constraints (experiments)")
     ren.set_defaults(func=cmd_render)
 
     bnd = sub.add_parser("bound", help="code-size bounds and the largest arrays they allow")
@@ -225,8 +306,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     bnd.set_defaults(func=cmd_bound)
 
     ben = sub.add_parser("benchmark", help="rerun Table I: every generator on every row")
-    ben.add_argument("--seeds", type=int, default=3, help="seeds per cell (default 3)")
-    ben.add_argument("--time-limit", type=float, default=10.0, metavar="SECONDS",
+    ben.add_argument("--seeds", type=_number(int, 1, 1000, "--seeds"), default=3,
+                     help="seeds per cell (default 3)")
+    ben.add_argument("--time-limit", type=_number(float, 0.001, 1e6, "--time-limit"),
+                     default=10.0, metavar="SECONDS",
                      help="budget per run (default 10)")
     ben.add_argument("--algorithms", nargs="+", choices=names[1:], default=None,
                      help="generators to compare (default: all but auto)")

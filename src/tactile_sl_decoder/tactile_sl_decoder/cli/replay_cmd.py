@@ -27,8 +27,12 @@ def register(subparsers: Any) -> None:
                    help="bag to write (/tactile/points)")
     p.add_argument("--pattern", metavar="P.yaml", default=None,
                    help="pattern file (default: the pattern the project ships)")
+    p.add_argument("--allow-invalid-pattern", action="store_true",
+                   help="use a pattern file that breaks its own min_hamming / window "
+                        "uniqueness (experiments only; cells may be wrong)")
     p.add_argument("--classifier", metavar="WEIGHTS", default=None,
-                   help="classifier weights (default: the shipped ones)")
+                   help="classifier weights (default: the shipped ones); their class count "
+                        "must equal the pattern's symbols")
     p.add_argument("--mirrored", action="store_true",
                    help="the cameras see the artwork mirrored (sensor setting)")
     p.add_argument("--sensor", metavar="SENSOR.yaml", default=None,
@@ -54,13 +58,14 @@ def _positive_int(text: str) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Replay a bag; exit status 0 on success, 1 on bad input files."""
-    from tactile_sl_camera.bag_io import BagError, BagWriter
+    from tactile_sl_camera.bag_io import BagError, BagReader, BagWriter
     from tactile_sl_camera.clouds import cloud_fields
     from tactile_sl_camera.images import ImageFormatError, to_gray
+    from tactile_sl_camera.safe_files import OutputError, check_output, same_file
+    from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
     from tactile_sl_decoder.codewords import PatternError
     from tactile_sl_decoder.e2e_metrics import progress_bar
     from tactile_sl_decoder.pipeline import (
-        PatternSpec,
         PipelineInputError,
         PipelineParams,
         StereoPipeline,
@@ -70,15 +75,19 @@ def run(args: argparse.Namespace) -> int:
     )
 
     out_path = Path(args.output)
-    if Path(args.input).resolve() == out_path.resolve():
-        print("tactile-sl replay: OUT.mcap must differ from IN.mcap", file=sys.stderr)
-        return 2
-    try:
-        pattern = PatternSpec.load(args.pattern)
+    try:     # OUT must not be IN: decided by the file system (hard links, bag directories)
+        check_output(out_path, [args.input])
+    except OutputError as exc:
+        print(f"tactile-sl replay: {exc}", file=sys.stderr)
+        return 2 if (same_file(args.input, out_path) or Path(args.input).is_dir()) else 1
+    pipeline = None
+    try:     # the whole input is validated before any output exists
+        pattern = load_pattern_spec(args.pattern, args.allow_invalid_pattern)
         params = PipelineParams(classifier_weights=args.classifier)
         params.decode.mirrored = bool(args.mirrored)
         pipeline = StereoPipeline(pattern, None, params)
-        pipeline.load_classifier()    # fail before touching the output
+        check_classifier(pipeline.load_classifier(), pattern.symbols,
+                         args.classifier or "(shipped)")
         touch = None
         if not args.no_touch:
             from tactile_sl_decoder.touch.sensor import load_sensor
@@ -88,8 +97,18 @@ def run(args: argparse.Namespace) -> int:
             touch = TouchStage(sensor, pattern.array.shape, pattern.pitch_m,
                                bool(args.mirrored),
                                TouchParams(reference_frames=args.reference_frames))
+        reader = BagReader(args.input)
+        topics = bag_topics(args.namespace)
+        reader.require_topics([topics[k] for k in ("left_image", "right_image", "left_info",
+                                                  "right_info")])
+        reader.verify()
         total = count_bag_frames(args.input, args.namespace)
+        if total == 0:
+            raise BagError(f"{reader.path}: no stereo frames (0 messages on "
+                           f"{topics['left_image']}); nothing to replay")
     except (BagError, PatternError, OSError, ValueError) as exc:
+        if pipeline is not None:
+            pipeline.close()
         print(f"tactile-sl replay: {exc}", file=sys.stderr)
         return 1
     prefix = bag_topics(args.namespace)["left_image"].rsplit("/left/", 1)[0]
@@ -124,8 +143,8 @@ def run(args: argparse.Namespace) -> int:
                 writer.write(topic, "sensor_msgs/msg/PointCloud2", msg, frame.stamp_ns)
                 written += 1
                 touch_written += _write_touch(writer, touch, result, frame, prefix)
-    except BagError as exc:
-        print(f"\ntactile-sl replay: {exc}", file=sys.stderr)
+    except (BagError, OSError) as exc:
+        print(f"\ntactile-sl replay: {exc}; {out_path} not written", file=sys.stderr)
         return 1
     finally:
         pipeline.close()

@@ -10,6 +10,19 @@ from typing import Any
 from tactile_sl_decoder.classifier import DEFAULT_THRESHOLD, default_weights_path
 
 
+def _number(kind: type, low: float, high: float) -> Any:
+    """Build an argparse type: a ``kind`` number in [low, high]."""
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {kind.__name__}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be in [{low}, {high}], got {text}")
+        return value
+    return parse
+
+
 def register(subparsers: Any) -> None:
     """Add the ``train`` subcommand."""
     p = subparsers.add_parser(
@@ -18,16 +31,20 @@ def register(subparsers: Any) -> None:
         "extract glyphs, label them from the ground truth and train the LeNet classifier. "
         "Held-out frames use other seeds and other indenter kinds. Writes the weights "
         "(default: the ones the package ships) and a model card next to them.")
-    p.add_argument("--frames", type=int, default=80, help="training stereo frames (default 80)")
-    p.add_argument("--val-frames", type=int, default=16,
+    p.add_argument("--frames", type=_number(int, 1, 100_000), default=80,
+                   help="training stereo frames (default 80)")
+    p.add_argument("--val-frames", type=_number(int, 1, 100_000), default=16,
                    help="held-out stereo frames (default 16)")
-    p.add_argument("--epochs", type=int, default=12, help="passes over the data (default 12)")
-    p.add_argument("--seed", type=int, default=1, help="seed of data and training (default 1)")
-    p.add_argument("--threshold", type=float, default=DEFAULT_THRESHOLD,
+    p.add_argument("--epochs", type=_number(int, 1, 10_000), default=12,
+                   help="passes over the data (default 12)")
+    p.add_argument("--seed", type=_number(int, 0, 2**31 - 1), default=1,
+                   help="seed of data and training (default 1)")
+    p.add_argument("--threshold", type=_number(float, 0.0, 1.0), default=DEFAULT_THRESHOLD,
                    help=f"confidence threshold stored with the weights ({DEFAULT_THRESHOLD})")
     p.add_argument("--artwork", default=None,
                    help="artwork PNG the simulator renders (default: the installed one)")
-    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (default 1)")
+    p.add_argument("--threads", type=_number(int, 1, 1024), default=1,
+                   help="torch CPU threads (default 1)")
     p.add_argument("-o", "--output", type=Path, default=None,
                    help=f"weights file (default {default_weights_path()})")
     p.add_argument("--card", type=Path, default=None,
@@ -37,6 +54,17 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Generate data, train, save weights and card; returns the exit status."""
+    from tactile_sl_camera.safe_files import OutputError, atomic_path, check_output, write_text
+
+    out = args.output or default_weights_path()
+    card = args.card or out.with_name("classifier_card.md")
+    try:     # before minutes of rendering and training: can the results be written?
+        check_output(out)
+        check_output(card)
+    except OutputError as exc:
+        print(f"train: {exc}", file=sys.stderr)
+        return 1
+
     import torch
 
     from tactile_sl_decoder.training import (
@@ -54,8 +82,6 @@ def run(args: argparse.Namespace) -> int:
         print("train: --frames, --val-frames and --epochs must be >= 1", file=sys.stderr)
         return 2
     torch.set_num_threads(max(1, args.threads))
-    out = args.output or default_weights_path()
-    card = args.card or out.with_name("classifier_card.md")
     start = time.monotonic()
     try:
         bar = Progress(args.frames + args.val_frames, "render")
@@ -71,7 +97,12 @@ def run(args: argparse.Namespace) -> int:
                    epochs=args.epochs, seed=args.seed, threshold=args.threshold,
                    meta={"seed": args.seed, "torch": str(torch.__version__),
                          "frames": args.frames, "val_frames": args.val_frames})
-    save_blob(result.blob, out)
+    try:
+        with atomic_path(out) as tmp:
+            save_blob(result.blob, tmp)
+    except OSError as exc:
+        print(f"train: cannot write {out}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
     note = (f"Simulator frames (`tactile_sl_camera.sim`, shipped artwork), both cameras: "
             f"{args.frames} training frames (seed {args.seed}, indenters "
             f"{', '.join(TRAIN_KINDS)}) and {args.val_frames} held-out frames (seed "
@@ -83,7 +114,11 @@ def run(args: argparse.Namespace) -> int:
             "augmentation: rotation +-15 deg, scale +-15 %, anisotropy +-15 %, shear +-0.15, "
             "shift +-1.2 px, "
             "gamma, contrast, offset, blur, noise.")
-    card.write_text(model_card(result, note, data_seconds))
+    try:
+        write_text(card, model_card(result, note, data_seconds))
+    except OSError as exc:
+        print(f"train: cannot write {card}: {exc.strerror or exc}", file=sys.stderr)
+        return 1
     print(f"wrote {out} ({out.stat().st_size} bytes) and {card}")
     print(f"held-out accuracy {100 * result.val_accuracy:.3f} % "
           f"(confident {100 * result.val_confident_accuracy:.3f} %, unknown "

@@ -26,6 +26,10 @@ class PatternFormatError(ValueError):
     """A pattern file that does not follow the contract format."""
 
 
+class PatternInvalidError(PatternFormatError):
+    """A well-formed pattern file whose array breaks its own ``min_hamming`` / uniqueness."""
+
+
 @dataclass
 class Pattern:
     """An M-array with the constraints it claims and its physical layout."""
@@ -154,18 +158,39 @@ def pattern_from_dict(doc: Any, source: str = "<pattern>") -> Pattern:
     return Pattern(grid, constraints, float(pitch), list(primitives), extra)
 
 
-def load_pattern(path: str | Path) -> Pattern:
-    """Read and validate a pattern file (see :func:`pattern_from_dict`)."""
+def load_pattern(path: str | Path, verify: bool = True) -> Pattern:
+    """Read and validate a pattern file (see :func:`pattern_from_dict`).
+
+    With ``verify`` (the default) the array is also checked against its own constraints
+    (every two windows differ in at least ``min_hamming`` cells, so windows are unique) and
+    :class:`PatternInvalidError` is raised when it breaks them: a decoder using such a file
+    would assign glyphs to the wrong cells.  ``verify=False`` is for tools that inspect
+    invalid files (``tactile-sl pattern verify``) and for experiments.
+    """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
-        raise PatternFormatError(f"{path}: cannot read pattern file ({exc.strerror})") from None
+        raise PatternFormatError(f"{path}: cannot read pattern file "
+                                 f"({exc.strerror or exc})") from None
+    except UnicodeDecodeError:
+        raise PatternFormatError(f"{path}: not a text file (not UTF-8), "
+                                 "so not a pattern file") from None
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise PatternFormatError(f"{path}: not valid YAML ({exc})") from None
-    return pattern_from_dict(doc, str(path))
+    pattern = pattern_from_dict(doc, str(path))
+    if verify:
+        from .verify import verify_pattern
+
+        cert = verify_pattern(pattern)
+        if not cert.valid:
+            raise PatternInvalidError(
+                f"{path}: pattern breaks its own constraints ({'; '.join(cert.problems)}); "
+                "refusing to use it (`tactile-sl pattern verify` shows the certificate; "
+                "allow_invalid_pattern / --allow-invalid-pattern for experiments)")
+    return pattern
 
 
 def dump_pattern(pattern: Pattern) -> str:
@@ -186,5 +211,7 @@ def dump_pattern(pattern: Pattern) -> str:
 
 
 def save_pattern(pattern: Pattern, path: str | Path) -> None:
-    """Write the pattern file (the array rows as quoted strings, one per line)."""
-    Path(path).write_text(dump_pattern(pattern), encoding="utf-8")
+    """Write the pattern file (the array rows as quoted strings, one per line), atomically."""
+    from tactile_sl_camera.safe_files import write_text
+
+    write_text(path, dump_pattern(pattern))
