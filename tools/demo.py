@@ -1,14 +1,19 @@
-"""`make demo`: a bundled bag through the ROS graph, stereo images in, point clouds out.
+"""`make demo`: a bundled bag through the ROS graph, stereo images in, points and touch out.
 
 Starts the installed node executables as separate processes (what `ros2 run` runs), in
 namespace /tactile, with localhost-only DDS and a private domain id:
 
-    replay (bag -> left|right/image_raw + camera_info)  ->  decoder (-> points)
+    replay (bag -> left|right/image_raw + camera_info)
+        ->  decoder (-> points, field, wrench, contact, depth)
 
-The replay is paced by `points` (each stereo frame is sent once the previous frame's cloud
-is out), so the throughput printed is what the graph sustains. This process listens to
-`points` and `left/symbols_decoded`, compares the clouds with the bag's ground truth, and
-writes a decoded-overlay picture and a picture of the point cloud to out/demo/.
+The default bag, bags/touch_halfspace.mcap, presses a known load (0.05 to 2 N, then sheared
+and twisted) on the simulated pad; its first frame is the untouched reference.  The replay
+is paced by `points` (each stereo frame is sent once the previous frame's cloud is out), so
+the throughput printed is what the graph sustains. This process listens to `points`,
+`left/symbols_decoded` and the touch topics, compares them with the bag's ground truth
+(coverage, wrong cells, 3-D error; force, shear, centroid, area, depth, in_contact), and
+writes to out/demo/ a decoded-overlay picture, a picture of the point cloud, the pressure
+map with shear arrows and the depth map of the most loaded frame.
 """
 from __future__ import annotations
 
@@ -22,13 +27,14 @@ import time
 import cv2
 import numpy as np
 import rclpy
+from geometry_msgs.msg import WrenchStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import PointCloud2
+from sensor_msgs.msg import Image, PointCloud2
 
 from tactile_sl_camera.bag_io import stamp_to_ns
-from tactile_sl_camera.clouds import cloud_to_arrays
+from tactile_sl_camera.clouds import FIELD_FORCE_DTYPE, cloud_to_arrays
 from tactile_sl_camera.images import to_gray
 from tactile_sl_decoder.e2e_metrics import (
     aggregate,
@@ -38,17 +44,32 @@ from tactile_sl_decoder.e2e_metrics import (
     render_overlay,
 )
 from tactile_sl_decoder.pipeline import PatternSpec, bag_frames, glyphs_from_symbol_array
-from tactile_sl_msgs.msg import SymbolArray
+from tactile_sl_decoder.touch.contact import depth_grid
+from tactile_sl_decoder.touch.sensor import SensorFileError, sensor_yaml_text
+from tactile_sl_decoder.touch_metrics import (
+    has_touch_truth,
+    read_truths,
+    render_depth,
+    render_pressure,
+    resolve_sensor,
+    sensor_text,
+)
+from tactile_sl_msgs.msg import Contact, SymbolArray
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 from ros_harness import executable, ros_env, stop  # noqa: E402
 
-DEFAULT_BAG = REPO / "bags" / "two_contacts.mcap"
+DEFAULT_BAG = REPO / "bags" / "touch_halfspace.mcap"
+TOUCH = {"field": PointCloud2, "wrench": WrenchStamped, "contact": Contact, "depth": Image}
+
+
+def _ns(header: object) -> int:
+    return stamp_to_ns(header.stamp.sec, header.stamp.nanosec)  # type: ignore[attr-defined]
 
 
 class Listener:
-    """Collects clouds and decoded symbols, with arrival times (monotonic)."""
+    """Collects clouds, decoded symbols and touch outputs, with arrival times (monotonic)."""
 
     def __init__(self, domain_id: int) -> None:
         self.context = Context()
@@ -62,6 +83,10 @@ class Listener:
         self.symbols: dict[int, SymbolArray] = {}
         self.node.create_subscription(PointCloud2, "points", self._on_cloud, qos)
         self.node.create_subscription(SymbolArray, "left/symbols_decoded", self._on_symbols, qos)
+        self.touch: dict[str, dict[int, object]] = {name: {} for name in TOUCH}
+        for name, kind in TOUCH.items():
+            self.node.create_subscription(
+                kind, name, lambda m, n=name: self.touch[n].__setitem__(_ns(m.header), m), qos)
 
     def _on_cloud(self, msg: PointCloud2) -> None:
         self.clouds[stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)] = (
@@ -89,17 +114,29 @@ def start(package: str, name: str, args: list[str], domain_id: int, log: pathlib
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--bag", type=pathlib.Path, default=DEFAULT_BAG)
+    parser.add_argument("--sensor", type=pathlib.Path, default=None,
+                        help="sensor file for the decoder (default: the elastomer of the bag's "
+                        "scene in bags/*scenes.yaml, else the shipped one)")
     parser.add_argument("--out", type=pathlib.Path, default=REPO / "out" / "demo")
     parser.add_argument("--domain-id", type=int,
                         default=int(os.environ.get("DEMO_DOMAIN_ID", 23)))
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     bag = args.bag.resolve()
-    print(f"demo: {bag.name} -> replay -> decoder -> points  "
+    try:
+        sensor, sensor_from = resolve_sensor(bag, args.sensor)
+    except SensorFileError as exc:
+        print(f"demo: {exc}")
+        return 1
+    sensor_file = args.out / "sensor.yaml"
+    sensor_file.write_text(sensor_yaml_text(sensor, f"demo: {sensor_from}"))
+    print(f"demo: {bag.name} -> replay -> decoder -> points + touch  "
           f"(ROS domain {args.domain_id}, DDS on loopback only)")
+    print(f"sensor: {sensor_text(sensor)} ({sensor_from})")
 
     listener = Listener(args.domain_id)
-    decoder = start("tactile_sl_decoder", "decoder", ["-r", "__ns:=/tactile"],
+    decoder = start("tactile_sl_decoder", "decoder",
+                    ["-r", "__ns:=/tactile", "-p", f"sensor_file:={sensor_file}"],
                     args.domain_id, args.out / "decoder.log")
     replay = None
     try:
@@ -135,10 +172,15 @@ def main() -> int:
         got = listener.clouds.get(frame.stamp_ns)
         if got is not None and frame.ground_truth is not None:
             metrics.append(frame_metrics(got[1], frame.ground_truth, tol, frame.stamp_ns))
-    print(f"\nclouds received: {len(listener.clouds)} of {len(frames)} stereo frames")
+    print(f"\nclouds received: {len(listener.clouds)} of {len(frames)} stereo frames; "
+          f"touch outputs for {len(listener.touch['wrench'])} (the first frame is the "
+          "untouched reference)")
     if not metrics:
         print(f"demo: no point cloud came out; see {args.out / 'decoder.log'}")
         return 1
+    truths = read_truths(bag) if has_touch_truth(bag) else {}
+    print_frames(frames, metrics, listener, truths)
+    print()
     format_table([aggregate(bag.stem, metrics)])
 
     arrivals = sorted(t for t, _ in listener.clouds.values())
@@ -158,10 +200,72 @@ def main() -> int:
                                  glyphs_from_symbol_array(listener.symbols[stamp]))
         cv2.imwrite(str(args.out / "overlay_left.png"), overlay)
     depth = depths[stamp]
-    print(f"\npictures: {args.out.relative_to(REPO) if args.out.is_relative_to(REPO) else args.out}"
-          f"/overlay_left.png (glyphs by class, cells annotated), cloud.png "
-          f"({cloud.width} points, z {depth.min() * 1e3:.2f}..{depth.max() * 1e3:.2f} mm)")
+    where = args.out.relative_to(REPO) if args.out.is_relative_to(REPO) else args.out
+    print(f"\npictures: {where}/overlay_left.png (glyphs by class, cells annotated), "
+          f"cloud.png ({cloud.width} points, z {depth.min() * 1e3:.2f}..{depth.max() * 1e3:.2f} "
+          "mm)")
+    touch_pictures(listener, pattern, frames[0].stamp_ns, args.out, where)
     return 0
+
+
+def print_frames(frames: list, metrics: list, listener: Listener, truths: dict) -> None:
+    """One line per frame: coverage beside force and contact (estimate, truth in brackets)."""
+    by_stamp = {m.stamp_ns: m for m in metrics}
+    t0 = frames[0].stamp_ns - frames[0].stamp_ns % 1_000_000_000 if frames else 0
+    print("per frame: estimate [truth]; Fn normal force, shear (Fx, Fy), centroid (x, y), "
+          "pad frame")
+    print(f"{'t s':>5} {'coverage':>8} {'wrong':>5} {'rmse mm':>7}  {'Fn N':<16} "
+          f"{'shear mN':<30} {'centroid mm':<28} {'area mm2':<14} {'depth um':<11} contact")
+    for frame in frames:
+        s = frame.stamp_ns
+        m = by_stamp.get(s)
+        head = (f"{(s - t0) / 1e9:>5.1f} " + (f"{100 * m.coverage:>7.1f}% {m.wrong:>5} "
+                                              f"{1e3 * m.summary()['rmse_m']:>7.4f}  "
+                                              if m else f"{'-':>8} {'-':>5} {'-':>7}  "))
+        w, c = listener.touch["wrench"].get(s), listener.touch["contact"].get(s)
+        if w is None or c is None:
+            print(head + "(reference frame: no touch output)")
+            continue
+        t = truths.get(s)
+        f = w.wrench.force
+        tr = (lambda text: f"[{text}]") if t is not None else (lambda text: "")
+        tf = t.force if t is not None and t.force is not None else None
+        fn = f"{-f.z:.3f}" + (tr(f"{-tf[2]:.3f}") if tf is not None else "")
+        sh = f"{1e3 * f.x:+.1f},{1e3 * f.y:+.1f}" + (
+            tr(f"{1e3 * tf[0]:+.1f},{1e3 * tf[1]:+.1f}") if tf is not None else "")
+        ce = f"{1e3 * c.centroid.x:+.3f},{1e3 * c.centroid.y:+.3f}" + (
+            tr(f"{1e3 * t.centroid[0]:+.3f},{1e3 * t.centroid[1]:+.3f}") if t else "")
+        ar = f"{1e6 * c.area:.1f}" + (tr(f"{1e6 * t.area:.1f}") if t else "")
+        de = f"{1e6 * c.max_depth:.0f}" + (tr(f"{1e6 * t.max_depth:.0f}") if t else "")
+        co = str(c.in_contact) + (tr(str(t.in_contact)) if t else "")
+        print(head + f"{fn:<16} {sh:<30} {ce:<28} {ar:<14} {de:<11} {co}")
+
+
+def touch_pictures(listener: Listener, pattern: PatternSpec, t0_ns: int, out: pathlib.Path,
+                   where: object) -> None:
+    """pressure.png and depth.png of the most loaded frame (largest |force|)."""
+    wrenches = listener.touch["wrench"]
+    have = [s for s in wrenches if s in listener.touch["field"] and s in listener.touch["depth"]]
+    if not have:
+        print("no touch output came out: no pressure or depth picture")
+        return
+    stamp = max(have, key=lambda s: np.hypot(np.hypot(wrenches[s].wrench.force.x,
+                                                       wrenches[s].wrench.force.y),
+                                              wrenches[s].wrench.force.z))
+    f = wrenches[stamp].wrench.force
+    t = (stamp - t0_ns + t0_ns % 1_000_000_000) / 1e9
+    label = f"t {t:.1f} s, Fn {-f.z:.3f} N, shear ({1e3 * f.x:+.0f}, {1e3 * f.y:+.0f}) mN"
+    field = cloud_to_arrays(listener.touch["field"][stamp], FIELD_FORCE_DTYPE)
+    cv2.imwrite(str(out / "pressure.png"), render_pressure(
+        field, pattern.pitch_m, f"pressure per cell (kPa) and shear, pad frame; {label}"))
+    msg = listener.touch["depth"][stamp]
+    depth = np.frombuffer(bytes(msg.data), dtype="<f4").reshape(msg.height, msg.width)
+    rows, cols = pattern.array.shape
+    grid = depth_grid((rows, cols), pattern.pitch_m, max(1, (msg.width - 1) // max(cols - 1, 1)))
+    cv2.imwrite(str(out / "depth.png"), render_depth(
+        depth, grid.x0, grid.y0, grid.resolution, f"depth map (um), pad frame; {label}"))
+    print(f"          {where}/pressure.png (pressure per cell, shear arrows) and depth.png "
+          f"(indentation, grey = not decoded), most loaded frame ({label})")
 
 
 if __name__ == "__main__":

@@ -18,10 +18,13 @@ def register(subparsers: Any) -> None:
     """Add the ``evaluate`` subcommand."""
     p = subparsers.add_parser(
         "evaluate", help="per scene and frame: extraction recall/spurious rate, "
-        "classification accuracy and confusion matrix against a bag's ground truth",
+        "classification accuracy and confusion matrix, end-to-end and touch figures against "
+        "a bag's ground truth",
         description="Runs glyph extraction and classification on every frame of bags that "
         "carry /tactile/ground_truth/points and compares with the ground truth projected "
-        "into both images (see docs/extraction.md for the definitions).")
+        "into both images (see docs/extraction.md for the definitions); then the end-to-end "
+        "figures, and for bags with /tactile/ground_truth/wrench the touch figures "
+        "(docs/touch_evaluation.md).")
     p.add_argument("bags", nargs="+", type=Path, help="MCAP bags with ground truth")
     p.add_argument("--pattern", type=Path, default=None,
                    help="pattern YAML giving the true symbol of each cell (default: shipped)")
@@ -33,6 +36,12 @@ def register(subparsers: Any) -> None:
     p.add_argument("--totals-only", action="store_true",
                    help="print one row per scene instead of one per image")
     p.add_argument("--json", type=Path, default=None, help="also write every figure as JSON")
+    p.add_argument("--sensor", type=Path, default=None, metavar="SENSOR.yaml",
+                   help="sensor file for the touch figures (default: the elastomer of the "
+                   "bag's scene in a *scenes.yaml beside it, else the shipped sensor file)")
+    p.add_argument("--reference-frames", type=_reference_frames, default=1, metavar="N",
+                   help="touch figures: the first N decoded frames are the untouched "
+                   "reference, as in `tactile-sl replay` (default 1)")
     p.set_defaults(func=run)
 
 
@@ -43,6 +52,16 @@ def _non_negative_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
+def _reference_frames(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 1 <= value <= 1000:
+        raise argparse.ArgumentTypeError(f"must be in 1..1000, got {value}")
     return value
 
 
@@ -142,8 +161,21 @@ def e2e_sections(args: argparse.Namespace, bags: list[Path]) -> str:
     return e2e_section(args, bags)
 
 
+def touch_sections(args: argparse.Namespace, bags: list[Path]) -> str:
+    """Touch figures (displacement, force, moment, contact) of bags with touch ground truth."""
+    from tactile_sl_camera.bag_io import BagError
+    from tactile_sl_decoder.touch.sensor import SensorFileError
+    from tactile_sl_decoder.touch_metrics import touch_section
+
+    try:
+        return touch_section(args, bags)
+    except (SensorFileError, BagError) as exc:
+        raise SystemExit(f"evaluate: {exc}") from None
+
+
 SECTIONS: list[Callable[[argparse.Namespace, list[Path]], str]] = [symbol_sections,
-                                                                  e2e_sections]
+                                                                  e2e_sections,
+                                                                  touch_sections]
 """Report sections, printed in order."""
 
 
