@@ -18,6 +18,8 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from tactile_sl_camera.bag_io import BagError, stamp_to_ns
+from tactile_sl_camera.nodes import stop
+from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_camera.replay import ReplayPlan, Restamper
 
 
@@ -103,6 +105,8 @@ class ReplayNode(Node):
         self.min_subscribers = int(p("wait_for_subscribers").value)
         self.subscribers_timeout = float(p("wait_for_subscribers_timeout").value)
         self.done = threading.Event()
+        self._done_at: float | None = None
+        self._stopping = threading.Event()
         self.published = 0
         self.get_logger().info(
             f"replaying {self.plan.reader.path} ({self.plan.message_count} messages on "
@@ -112,6 +116,25 @@ class ReplayNode(Node):
         self._worker = threading.Thread(target=self._play, daemon=True)
         self._worker.start()
 
+    def _running(self) -> bool:
+        return rclpy.ok() and not self._stopping.is_set() and not stop.requested()
+
+    def finished(self) -> bool:
+        """The bag has been played (exit_on_end), and 0.3 s passed for the last delivery."""
+        if not (self.exit_on_end and self.done.is_set()):
+            return False
+        if self._done_at is None:
+            self._done_at = time.monotonic()
+        return time.monotonic() - self._done_at >= 0.3
+
+    def destroy_node(self) -> None:
+        """Stop and join the playing thread before the publishers go."""
+        self._stopping.set()
+        with self._ack:
+            self._ack.notify_all()
+        self._worker.join(timeout=5.0)
+        super().destroy_node()
+
     def _on_pace(self, msg: Any) -> None:
         with self._ack:
             self._acked.add(stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec))
@@ -119,11 +142,13 @@ class ReplayNode(Node):
 
     def _wait_for_subscribers(self) -> None:
         deadline = time.monotonic() + self.subscribers_timeout
-        while rclpy.ok() and time.monotonic() < deadline:
+        while self._running() and time.monotonic() < deadline:
             if all(pub.get_subscription_count() >= self.min_subscribers
                    for pub in self.publishers_by_topic.values()):
                 return
-            time.sleep(0.02)
+            self._stopping.wait(0.02)
+        if not self._running():
+            return
         lacking = [name for name, pub in self.publishers_by_topic.items()
                    if pub.get_subscription_count() < self.min_subscribers]
         self.get_logger().warning(
@@ -132,7 +157,8 @@ class ReplayNode(Node):
 
     def _wait_for_ack(self, stamp_ns: int) -> None:
         with self._ack:
-            if not self._ack.wait_for(lambda: stamp_ns in self._acked, self.wait_timeout):
+            if not self._ack.wait_for(lambda: stamp_ns in self._acked or not self._running(),
+                                      self.wait_timeout):
                 self.get_logger().warning(
                     f"no message on the pacing topic for stamp {stamp_ns} ns within "
                     f"{self.wait_timeout:.2f} s; moving on", throttle_duration_sec=5.0)
@@ -143,7 +169,7 @@ class ReplayNode(Node):
             if self.min_subscribers > 0:
                 self._wait_for_subscribers()
             loop_index = 0
-            while rclpy.ok():
+            while self._running():
                 self._play_pass(loop_index)
                 loop_index += 1
                 if not self.loop or (self.loops > 0 and loop_index >= self.loops):
@@ -164,8 +190,8 @@ class ReplayNode(Node):
                 self._wait_for_ack(published)
             delay = start + item.due_s - time.monotonic()
             if delay > 0:
-                time.sleep(delay)
-            if not rclpy.ok():
+                self._stopping.wait(delay)
+            if not self._running():
                 return
             data, stamp = restamper(item) if restamper else (item.data, item.stamp_ns)
             self.publishers_by_topic[item.topic].publish(data)
@@ -176,27 +202,9 @@ class ReplayNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ReplayNode()
-        while rclpy.ok() and not (node.exit_on_end and node.done.is_set()):
-            rclpy.spin_once(node, timeout_sec=0.1)
-        if node.exit_on_end:
-            time.sleep(0.3)  # let the middleware deliver the last frame before tearing down
-    except (BagError, ValueError) as exc:
-        if node is None:
-            rclpy.logging.get_logger("replay").fatal(str(exc))
-        else:
-            node.get_logger().fatal(str(exc))
-        raise SystemExit(1) from None
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.try_shutdown()
+    """Entry point of the ``replay`` executable."""
+    run_node(ReplayNode, "replay", (BagError, ValueError), args,
+             finished=lambda node: node.finished())
 
 
 if __name__ == "__main__":

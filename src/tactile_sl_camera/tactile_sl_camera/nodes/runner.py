@@ -1,36 +1,61 @@
-"""One way to run a node: spin until shutdown; a configuration error is one fatal line.
+"""One way to run a node: spin until asked to stop; a configuration error is one fatal line.
 
 Shared by the executables of both packages so that a bad parameter, calibration file or
 weights file ends every node the same way: a FATAL log line naming the problem and exit
-status 1, never a traceback; Ctrl-C and external shutdown end it quietly.
+status 1, never a traceback.  Ctrl-C and SIGTERM, at any moment (during start-up, in the
+middle of a frame, at the end of a replay), end it quietly with status 0: the signal only
+sets a flag (:mod:`.stop`), the current callback finishes, the node's threads are joined in
+its ``destroy_node`` and only then is rclpy shut down.
 """
 from __future__ import annotations
 
 from typing import Callable
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from . import stop
 
 ConfigurationErrors = tuple[type[BaseException], ...]
 
 
 def run_node(make_node: Callable[[], Node], name: str,
              fatal: ConfigurationErrors = (ValueError, OSError, RuntimeError),
-             args: list[str] | None = None) -> None:
-    """Create the node with ``make_node`` and spin it; ``fatal`` errors exit with status 1."""
-    rclpy.init(args=args)
+             args: list[str] | None = None,
+             finished: Callable[[Node], bool] | None = None) -> None:
+    """Create the node with ``make_node`` and spin it until a stop is requested.
+
+    ``fatal`` errors (while creating the node or in a callback) exit with status 1 after one
+    FATAL line; ``finished(node)`` returning True ends the spin normally (status 0).
+    """
+    stop.install()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
+    status = 0
+    executor = SingleThreadedExecutor()
     try:
-        node = make_node()
-        rclpy.spin(node)
+        if not stop.requested():
+            node = make_node()
+            executor.add_node(node)
+            while (not stop.requested() and rclpy.ok()
+                   and not (finished is not None and finished(node))):
+                executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except fatal as exc:
-        logger = node.get_logger() if node is not None else rclpy.logging.get_logger(name)
-        logger.fatal(str(exc))
-        raise SystemExit(1) from None
+        if not stop.requested():     # an error while stopping is not a configuration error
+            logger = node.get_logger() if node is not None else rclpy.logging.get_logger(name)
+            logger.fatal(str(exc))
+            status = 1
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        try:
+            if node is not None:
+                executor.remove_node(node)
+                node.destroy_node()
+        finally:
+            executor.shutdown(timeout_sec=1.0)
+            rclpy.try_shutdown()
+    if status:
+        raise SystemExit(status)
