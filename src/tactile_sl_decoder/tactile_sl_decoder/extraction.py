@@ -80,6 +80,13 @@ class ExtractionParams:
     """Spacing assumed when fewer than two glyphs are found."""
     refine: bool = True
     """Refine single-glyph centres to the grey-weighted centroid of their patch."""
+    rethreshold_large: bool = True
+    """Look again inside regions too large to be glyphs, with a threshold from those
+    regions' own pixels: a dark object touching the pad (seen through it between the glyphs)
+    merges with the ink under the image-wide threshold near its rim."""
+    large_offset: float = 8.0
+    """Grey levels below the local background (closing) a pixel of a large region must be
+    to count as ink."""
 
 
 @dataclass
@@ -175,6 +182,13 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
     ns = len(single)
     if ox or oy:
         centroids += (ox, oy)
+    extra = np.zeros((0, 3))
+    if params.rethreshold_large:
+        large = np.flatnonzero((pixels >= params.min_area_px) & (ratio > params.max_area_ratio))
+        large = large[large > 0]
+        if len(large):
+            extra = _glyphs_in_large_regions(roi, gray, ox, oy, labels, large, typical, params)
+            ns += len(extra)
     if len(multi):
         # preliminary spacing from the single glyphs: splits closer than a fraction of it
         # are not two glyphs
@@ -183,9 +197,13 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
         su, sv, sa = split_regions(labels, stats[multi], multi, k,
                                    params.split_iterations, params.min_split_distance * pre,
                                    params.core_radius * pre, params.min_core_fill)
-        uu = np.concatenate((centroids[single, 0], su + ox)).astype(np.float32)
-        vv = np.concatenate((centroids[single, 1], sv + oy)).astype(np.float32)
-        aa = np.concatenate((pixels[single], sa)).astype(np.float32)
+        uu = np.concatenate((centroids[single, 0], extra[:, 0], su + ox)).astype(np.float32)
+        vv = np.concatenate((centroids[single, 1], extra[:, 1], sv + oy)).astype(np.float32)
+        aa = np.concatenate((pixels[single], extra[:, 2], sa)).astype(np.float32)
+    elif len(extra):
+        uu = np.concatenate((centroids[single, 0], extra[:, 0])).astype(np.float32)
+        vv = np.concatenate((centroids[single, 1], extra[:, 1])).astype(np.float32)
+        aa = np.concatenate((pixels[single], extra[:, 2])).astype(np.float32)
     else:
         uu = centroids[single, 0].astype(np.float32)
         vv = centroids[single, 1].astype(np.float32)
@@ -201,6 +219,46 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
         uu[:ns] += du * step[:ns]
         vv[:ns] += dv * step[:ns]
     return Detections(uu, vv, aa, spacing, patches, local)
+
+
+def _glyphs_in_large_regions(roi: np.ndarray, gray: np.ndarray, ox: int, oy: int,
+                             labels: np.ndarray, large: np.ndarray, typical: float,
+                             params: ExtractionParams) -> np.ndarray:
+    """Single glyphs inside regions too large to be glyphs: (n, 3) u, v, area.
+
+    Inside such a region (a dark object seen through the pad, a shadow's rim) the ink is
+    still darker than its surroundings, but the image-wide threshold counted the background
+    as ink too.  Morphological black-hat (closing minus image) with a square a little
+    larger than a glyph keeps only dark features smaller than a glyph, whatever the
+    background level around them (object, its rim, paper); it is thresholded at
+    ``large_offset`` grey levels inside the large regions.  Only parts of a single glyph's
+    size are kept; anything larger or linked stays dropped.
+    """
+    lut = np.zeros(int(labels.max()) + 1, np.uint8)
+    lut[large] = 1
+    region = lut[labels]
+    h, w = region.shape
+    g = gray[oy:oy + h, ox:ox + w]
+    if g.shape != region.shape:
+        g = cv2.copyMakeBorder(g, 0, h - g.shape[0], 0, w - g.shape[1], cv2.BORDER_REPLICATE)
+    side = int(np.clip(2.0 * math.sqrt(typical), 5, 41)) | 1
+    kernel = np.ones((side, side), np.uint8)
+    op = cv2.MORPH_BLACKHAT if params.dark_glyphs else cv2.MORPH_TOPHAT
+    hat = cv2.morphologyEx(g, op, kernel, borderType=cv2.BORDER_REPLICATE)
+    ink = ((region > 0) & (hat >= params.large_offset)).astype(np.uint8) * 255
+    if params.open_size > 1:
+        ink = cv2.morphologyEx(ink, cv2.MORPH_OPEN,
+                               np.ones((params.open_size, params.open_size), np.uint8))
+    count, _lab, stats, cent = cv2.connectedComponentsWithStatsWithAlgorithm(
+        ink, 8, cv2.CV_32S, cv2.CCL_BBDT)
+    if count <= 1:
+        return np.zeros((0, 3))
+    area = stats[1:, cv2.CC_STAT_AREA].astype(np.float64)
+    ratio = area / typical
+    ok = (ratio >= max(params.min_area_ratio, 0.5)) & (ratio < params.split_ratio)
+    ok &= area >= params.min_area_px
+    c = cent[1:][ok]
+    return np.column_stack([c[:, 0] + ox, c[:, 1] + oy, area[ok]])
 
 
 def _ink_box(mask: np.ndarray) -> tuple[int, int, np.ndarray] | None:

@@ -42,6 +42,7 @@ from tactile_sl_decoder.glyphs import (  # noqa: F401
     glyphs_from_symbol_array,
 )
 from tactile_sl_decoder.grid import GridParams, build_grid, nearest_neighbours
+from tactile_sl_decoder.outliers import OutlierParams, surface_outliers
 from tactile_sl_decoder.stereo import StereoParams, StereoRig, match_and_triangulate
 
 
@@ -52,6 +53,7 @@ class PipelineParams:
     grid: GridParams = field(default_factory=GridParams)
     decode: DecodeParams = field(default_factory=DecodeParams)
     stereo: StereoParams = field(default_factory=StereoParams)
+    outliers: OutlierParams = field(default_factory=OutlierParams)
     extraction: Any = None          # tactile_sl_decoder.extraction.ExtractionParams
     threads: int = 2                # >1: extract + classify left and right concurrently
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
@@ -282,6 +284,14 @@ class StereoPipeline:
             rect_l = rect_r = None                       # rectify the matched ones only
         m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, self.params.stereo,
                                   rect_l, rect_r)
+        # Points off the smooth surface their lattice neighbours define are dropped: a glyph
+        # centre pulled aside in one image (shadow edge, dust, texture) or a wrong cell.
+        off = surface_outliers(m.xyz, m.row, m.col, (self.codebook.rows, ncols),
+                               self.params.outliers)
+        if off.any():
+            keep = ~off
+            return pack_points(m.xyz[keep], m.row[keep], m.col[keep]), m.rejected + int(
+                off.sum())
         return pack_points(m.xyz, m.row, m.col), m.rejected
 
     # ------------------------------------------------------------------ whole frames

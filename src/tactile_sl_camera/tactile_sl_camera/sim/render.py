@@ -227,7 +227,7 @@ def _line_kernel(length: float, angle_deg: float) -> np.ndarray:
     y = n + t * np.sin(np.radians(angle_deg))
     x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
     fx, fy = x - x0, y - y0
-    k = np.zeros((2 * n + 2, 2 * n + 2), np.float64)
+    k = np.zeros((2 * n + 1, 2 * n + 1), np.float64)  # odd size: filter2D anchors at n
     for dy, dx, w in ((0, 0, (1 - fx) * (1 - fy)), (0, 1, fx * (1 - fy)),
                       (1, 0, (1 - fx) * fy), (1, 1, fx * fy)):
         np.add.at(k, (y0 + dy, x0 + dx), w)

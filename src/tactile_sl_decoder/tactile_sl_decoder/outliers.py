@@ -1,0 +1,127 @@
+"""Geometric outlier rejection: drop points that leave the smooth pad surface.
+
+The decoded points are samples of a smooth surface on the pattern's lattice, so every point
+is predicted by its lattice neighbours.  A glyph centre pulled aside in one image (a shadow
+edge, a hot spot, a dust speck, an object's texture merging with the ink) changes the
+disparity, and a pixel of disparity moves the point by ~0.1 mm in depth (z^2 / (f B) at
+15 mm, f 540 px, B 4 mm) while the surface between neighbours 0.5 mm apart bends by
+micrometres; a wrong cell puts the point a whole pitch from where its cell should be.
+
+For every cell and each of the four lattice directions (row, column, both diagonals) the
+point is predicted from its neighbours along that line: the fourth-order central stencil
+(-P[-2] + 4 P[-1] + 4 P[+1] - P[+2]) / 6, exact for cubics (so the curvature of a pressed
+sphere leaves no bias), else the mean of the two neighbours, else linear extrapolation from
+one side.  The residual is the smallest over the directions (one bad neighbour spoils only
+the lines through it), and a point is dropped when it exceeds
+``max(min_tolerance_m, mad_factor * 1.4826 * median residual)`` (the frame's own noise
+level, so noisy images are not thinned out).  Each pass drops only the worst point of each
+5 x 5 neighbourhood (a bad point spoils its neighbours' predictions too), removes it from
+the grid and tests again (``passes``), so a cluster of bad points does not shield itself and
+its good neighbours are not dropped with it.
+
+All of it is numpy on the (rows, cols) cell grid: no loop over points.  No rclpy.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import maximum_filter
+
+DIRECTIONS = ((0, 1), (1, 0), (1, 1), (1, -1))
+PAD = 2
+
+
+@dataclass
+class OutlierParams:
+    """Tolerances of the surface test (the decoder node exposes them as parameters)."""
+
+    enabled: bool = True
+    min_tolerance_m: float = 1e-4   # floor of the residual tolerance (~1 px of disparity)
+    mad_factor: float = 8.0          # tolerance in robust standard deviations of the frame
+    local_factor: float = 4.0        # and this many times the neighbours' median residual
+    passes: int = 6                  # repeat with the dropped points removed
+
+
+def _shift(grid: np.ndarray, dr: int, dc: int) -> np.ndarray:
+    """Grid value at (r + dr, c + dc) for every interior cell (padding is NaN)."""
+    rows, cols = grid.shape[0] - 2 * PAD, grid.shape[1] - 2 * PAD
+    return grid[PAD + dr:PAD + dr + rows, PAD + dc:PAD + dc + cols]
+
+
+def surface_residuals(grid: np.ndarray) -> np.ndarray:
+    """Smallest distance (m) of each cell's point from its neighbours' predictions.
+
+    ``grid``: (rows + 4, cols + 4, 3) points with NaN where no point (two cells of NaN
+    padding).  Returns (rows, cols); NaN where no point or no prediction.
+    """
+    centre = _shift(grid, 0, 0)
+    best = np.full(centre.shape[:2], np.inf)
+    one_sided = np.full(centre.shape[:2], np.inf)
+    for dr, dc in DIRECTIONS:
+        a1, b1 = _shift(grid, -dr, -dc), _shift(grid, dr, dc)
+        a2, b2 = _shift(grid, -2 * dr, -2 * dc), _shift(grid, 2 * dr, 2 * dc)
+        pred4 = (4.0 * (a1 + b1) - a2 - b2) / 6.0
+        pred2 = 0.5 * (a1 + b1)
+        pred = np.where(np.isfinite(pred4), pred4, pred2)
+        best = np.fmin(best, np.linalg.norm(centre - pred, axis=-1))
+        for p1, p2 in ((a1, a2), (b1, b2)):
+            one_sided = np.fmin(one_sided, np.linalg.norm(centre - (2.0 * p1 - p2), axis=-1))
+    res = np.where(np.isfinite(best), best, one_sided)
+    return np.where(np.isfinite(res) & np.isfinite(centre[..., 0]), res, np.nan)
+
+
+def surface_outliers(xyz: np.ndarray, row: np.ndarray, col: np.ndarray,
+                     shape: tuple[int, int], params: OutlierParams | None = None) -> np.ndarray:
+    """Boolean mask of the points that leave the surface their lattice neighbours define.
+
+    ``xyz`` (M, 3) metres, ``row``/``col`` (M,) their cells (unique), ``shape`` the pattern's
+    (rows, cols).  Points without any neighbour to judge them by are kept.
+    """
+    p = params or OutlierParams()
+    out = np.zeros(len(xyz), bool)
+    if not p.enabled or len(xyz) < 8:
+        return out
+    rows, cols = shape
+    grid = np.full((rows + 2 * PAD, cols + 2 * PAD, 3), np.nan)
+    r = np.asarray(row, np.int64) + PAD
+    c = np.asarray(col, np.int64) + PAD
+    grid[r, c] = xyz
+    for _ in range(max(1, p.passes)):
+        res_grid = surface_residuals(grid)
+        res = res_grid[r - PAD, c - PAD]
+        judged = np.isfinite(res) & ~out
+        if judged.sum() < 8:
+            break
+        scale = 1.4826 * float(np.median(res[judged]))
+        tol = max(p.min_tolerance_m, p.mad_factor * scale)
+        bad = judged & (res > tol)
+        if bad.any():
+            # A crease (an edge pressed in) bends the surface along a whole line: there the
+            # neighbours' residuals are large too, and the point is not an outlier.
+            local = _neighbour_median(res_grid)[r - PAD, c - PAD]
+            bad &= res > p.local_factor * local
+        if not bad.any():
+            break
+        # Drop only the worst point of each neighbourhood per pass: a bad point also spoils
+        # the predictions of its neighbours, which are judged again without it.
+        worst = np.zeros((rows, cols))
+        worst[r[bad] - PAD, c[bad] - PAD] = res[bad]
+        peak = maximum_filter(worst, size=5, mode="constant", cval=0.0)
+        bad &= res >= peak[r - PAD, c - PAD]
+        out |= bad
+        grid[r[bad], c[bad]] = np.nan
+    return out
+
+
+def _neighbour_median(res: np.ndarray) -> np.ndarray:
+    """Median of the finite residuals of each cell's 8 neighbours (0 where none)."""
+    padded = np.pad(res, 1, constant_values=np.nan)
+    rows, cols = res.shape
+    stack = np.stack([padded[1 + dr:1 + dr + rows, 1 + dc:1 + dc + cols]
+                      for dr in (-1, 0, 1) for dc in (-1, 0, 1) if dr or dc])
+    finite = np.isfinite(stack)
+    ordered = np.sort(np.where(finite, stack, np.inf), axis=0)
+    k = finite.sum(axis=0)
+    med = np.take_along_axis(ordered, ((np.maximum(k, 1) - 1) // 2)[None], axis=0)[0]
+    return np.where(k > 0, med, 0.0)
