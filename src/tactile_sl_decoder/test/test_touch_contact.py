@@ -67,3 +67,16 @@ def test_regions_centroid_area_and_hysteresis():
     w = _wrench(xy, f)
     assert not contact_state(xy, rows, cols, f, w, shape, 5e-4, indent, False, p).in_contact
     assert contact_state(xy, rows, cols, f, w, shape, 5e-4, indent, True, p).in_contact
+
+
+def test_noisy_resultant_centroid_defers_to_the_map():
+    shape = (10, 10)
+    rows, cols, xy, f = _forces(shape, {(4, 4): -0.01, (4, 5): -0.01})
+    w = _wrench(xy, f)
+    w[3] += 2e-5            # a moment error from far-field noise: 1 mm of centroid at 20 mN
+    p = ContactParams()
+    exact = contact_state(xy, rows, cols, f, w, shape, 5e-4, np.zeros(shape), False, p)
+    assert abs(exact.centroid[1] - (-0.5 * 5e-4 - 1e-3)) < 1e-9     # trusts the resultant
+    noisy = contact_state(xy, rows, cols, f, w, shape, 5e-4, np.zeros(shape), False, p,
+                          moment_noise=(10.0, 10.0))   # 30 uN m of moment noise
+    assert abs(noisy.centroid[1] - (-0.5 * 5e-4)) < 1e-4            # follows the map

@@ -20,6 +20,9 @@ class ContactParams:
     force_on: float = 0.010    # N: in_contact turns on above this normal force ...
     force_off: float = 0.005   # N: ... and off below this one (hysteresis)
     area_fraction: float = 0.2   # a cell counts into the area above this x its region's peak
+    core_fraction: float = 0.3   # a region's centroid from its cells above this x its peak
+    displacement_noise: float = 3e-6   # m per axis: weighs the two centroid estimates
+    map_centroid_sigma: float = 6e-5   # m: uncertainty of the map's centroid (pitch / 8)
     depth_upsample: int = 4    # depth-map pixels per cell pitch
 
     def validate(self) -> "ContactParams":
@@ -27,6 +30,10 @@ class ContactParams:
         if not 0 < self.force_off <= self.force_on:
             raise ValueError(f"need 0 < contact_force_off <= contact_force_on, got "
                              f"{self.force_off} and {self.force_on}")
+        if not 0 <= self.core_fraction < 1:
+            raise ValueError(f"core_fraction must be in [0, 1), got {self.core_fraction}")
+        if self.displacement_noise <= 0 or self.map_centroid_sigma <= 0:
+            raise ValueError("displacement_noise and map_centroid_sigma must be > 0")
         if not 0 < self.area_fraction < 1:
             raise ValueError(f"area_fraction must be in (0, 1), got {self.area_fraction}")
         if not 1 <= self.depth_upsample <= 16:
@@ -87,17 +94,24 @@ def max_indentation(indent: np.ndarray) -> float:
 
 def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                   forces: np.ndarray, wrench: np.ndarray, shape: tuple[int, int], pitch: float,
-                  indent_grid: np.ndarray, was_in_contact: bool,
-                  params: ContactParams) -> ContactState:
+                  indent_grid: np.ndarray, was_in_contact: bool, params: ContactParams,
+                  moment_noise: tuple[float, float] = (0.0, 0.0)) -> ContactState:
     """Contact state from per-cell forces (N) at rest positions (m) and the resultant.
 
-    The normal force, shear force and centroid come from the resultant (F, M) (the
-    pressure-weighted centroid of tractions at z = 0 is (M_y, -M_x) / P with P = -F_z,
-    since M = sum r x f); the area and the regions come from the per-cell map: a region is a
-    set of 8-connected pressing cells, and a cell counts into the area when it presses by
-    more than ``area_fraction`` of its region's peak (the map is smooth over about a cell,
-    so its low skirt lies outside the contact; 0.2 matches Hertz and uniform contacts of
-    radius 2.5-4.5 mm on the simulated scenes within about 20 %, docs/touch.md).
+    Normal and shear force come from the resultant.  The area and the regions come from
+    the per-cell map: a region is a set of 8-connected pressing cells; a cell counts into
+    the area when it presses by more than ``area_fraction`` of its region's peak (the map
+    is smooth over about a cell, so its low skirt lies outside the contact; 0.2 matches
+    Hertz and uniform contacts of radius 2.5-4.5 mm on the simulated scenes within about
+    20 %, docs/touch.md).
+
+    The centroid has two estimates: the resultant's, (M_y, -M_x) / P (exact for tractions
+    at z = 0 since M = sum r x f, but its noise grows with the lever arms of the whole
+    field: ``moment_noise`` is ||row|| of the M_x, M_y functionals, so the standard
+    deviation is ``displacement_noise`` x that / P), and the map's (force-weighted region
+    centroids, each from the region's cells above ``core_fraction`` of its peak: local,
+    uncertain to about ``map_centroid_sigma``).  They are combined per axis by inverse
+    variance (the minimum-variance unbiased combination of two independent estimates).
     """
     press = np.maximum(-forces[:, 2], 0.0)
     normal = max(-float(wrench[2]), 0.0)
@@ -110,7 +124,6 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     pressing = press > 0.0
     if normal <= 0.0 or not pressing.any():
         return state
-    state.centroid = (float(wrench[4]) / normal, -float(wrench[3]) / normal, 0.0)
     state.peak_pressure = float(press.max() / cell_area)
     grid = np.zeros(shape, np.uint8)
     grid[rows[pressing], cols[pressing]] = 1
@@ -121,7 +134,8 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
         sel = pressing & (region == k)
         w = press[sel]
         f = float(w.sum())
-        c = (w[:, None] * rest_xy[sel]).sum(axis=0) / f
+        core = np.where(w > params.core_fraction * w.max(), w, 0.0)
+        c = (core[:, None] * rest_xy[sel]).sum(axis=0) / core.sum()
         inside = int((w > params.area_fraction * w.max()).sum())
         regions.append((f, inside * cell_area, (float(c[0]), float(c[1]), 0.0), inside))
     regions.sort(key=lambda t: -t[0])
@@ -130,6 +144,17 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     state.region_centroid = [r[2] for r in regions]
     state.area = float(sum(state.region_area))
     state.cells_in_contact = int(sum(r[3] for r in regions))
+    total = sum(state.region_force)
+    from_map = np.array([sum(f * c[i] for f, c in zip(state.region_force,
+                                                      state.region_centroid)) / total
+                         for i in (0, 1)])
+    from_wrench = np.array([float(wrench[4]) / normal, -float(wrench[3]) / normal])
+    var_wrench = (params.displacement_noise * np.array([moment_noise[1], moment_noise[0]])
+                  / normal) ** 2
+    w_map = 1.0 / params.map_centroid_sigma ** 2
+    w_wrench = 1.0 / np.maximum(var_wrench, 1e-30)
+    cx, cy = (w_map * from_map + w_wrench * from_wrench) / (w_map + w_wrench)
+    state.centroid = (float(cx), float(cy), 0.0)
     return state
 
 

@@ -177,7 +177,7 @@ class TouchStage:
         indent[rows, cols] = -displacement[:, 2]
         contact = contact_state(ref.nominal[:, :2], ref_rows, ref_cols, forces_ref, wrench,
                                 self.shape, self.pitch, indent, self._in_contact,
-                                self.params.contact)
+                                self.params.contact, self.solver.moment_noise)
         self._in_contact = contact.in_contact
         depth = self._depth(indent)
         force = np.zeros((len(rows), 3))

@@ -93,6 +93,9 @@ class TractionSolver:
         s = s.reshape(6, 3 * n)
         fw = scipy.linalg.cho_factor(h + self.params.wrench_weight * eye, check_finite=False)
         self._wrench_rows = scipy.linalg.cho_solve(fw, s.T, check_finite=False).T @ g.T
+        # standard deviation of (M_x, M_y) per metre of i.i.d. displacement noise
+        self.moment_noise = (float(np.linalg.norm(self._wrench_rows[3])),
+                             float(np.linalg.norm(self._wrench_rows[4])))
         self._g32 = g.astype(np.float32)      # forward model: fit residuals (calibration)
         fm = scipy.linalg.cho_factor(h + self.params.map_weight * eye, check_finite=False)
         self._map = np.ascontiguousarray(
