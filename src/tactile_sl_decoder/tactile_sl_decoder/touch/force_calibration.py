@@ -22,10 +22,9 @@ from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
-import yaml
 
 from tactile_sl_camera.elasticity import Elastomer
-from tactile_sl_decoder.touch.sensor import SensorConfig
+from tactile_sl_decoder.touch.sensor import SensorConfig, read_yaml_file
 from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
 
 MIN_LOADS = 2
@@ -91,12 +90,7 @@ class ForceCalibration:
 def load_loads_file(path: str | os.PathLike) -> list[KnownLoad]:
     """The known loads: ``loads: [{frame: I, normal_force: N}, ...]`` (frames from 0)."""
     p = Path(path)
-    if not p.is_file():
-        raise ForceCalibrationError(f"{p}: no such loads file")
-    try:
-        doc = yaml.safe_load(p.read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ForceCalibrationError(f"{p}: not a YAML loads file ({exc})") from exc
+    doc = read_yaml_file(p, "loads", ForceCalibrationError)
     if not isinstance(doc, dict) or not isinstance(doc.get("loads"), list):
         raise ForceCalibrationError(f"{p}: expected a mapping with a 'loads' list of "
                                     "{frame, normal_force}")

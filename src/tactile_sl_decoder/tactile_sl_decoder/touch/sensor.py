@@ -114,16 +114,20 @@ def parse_sensor(doc: Any, source: str = "<memory>") -> SensorConfig:
     return SensorConfig(elastomer, frame, source)
 
 
+def read_yaml_file(path: Path, what: str, error: type[ValueError]) -> Any:
+    """The YAML document of a small settings file; ``error`` names a missing or bad file."""
+    if not path.is_file():
+        raise error(f"{path}: no such {what} file")
+    try:
+        return yaml.safe_load(path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise error(f"{path}: not a YAML {what} file ({exc})") from exc
+
+
 def load_sensor(path: str | os.PathLike | None = None) -> SensorConfig:
     """Load and validate a sensor file (default: the shipped one)."""
     p = Path(path) if path else default_sensor_path()
-    if not p.is_file():
-        raise SensorFileError(f"{p}: no such sensor file")
-    try:
-        doc = yaml.safe_load(p.read_text())
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise SensorFileError(f"{p}: not a YAML sensor file ({exc})") from exc
-    return parse_sensor(doc, str(p))
+    return parse_sensor(read_yaml_file(p, "sensor", SensorFileError), str(p))
 
 
 def sensor_yaml_text(config: SensorConfig, comment: str = "") -> str:
