@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Callable
 
 import rclpy
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -44,7 +45,7 @@ def run_node(make_node: Callable[[], Node], name: str,
                 executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except fatal as exc:
+    except (*fatal, ParameterException) as exc:   # also: a value out of range, a wrong type
         if not stop.requested():     # an error while stopping is not a configuration error
             logger = node.get_logger() if node is not None else rclpy.logging.get_logger(name)
             logger.fatal(str(exc))

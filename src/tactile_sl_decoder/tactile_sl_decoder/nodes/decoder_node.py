@@ -23,18 +23,18 @@ import time
 from typing import Any
 
 import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 
 from tactile_sl_camera.clouds import cloud_fields
 from tactile_sl_camera.images import ImageFormatError, to_gray
+from tactile_sl_camera.nodes.parameters import LiveParameters, dataclass_fields, field_docs
 from tactile_sl_camera.nodes.runner import run_node
+from tactile_sl_decoder.checks import check_classifier, check_threshold, load_pattern_spec
 from tactile_sl_decoder.nodes.touch_outputs import TouchOutputs
 from tactile_sl_decoder.pipeline import (
     Glyphs,
-    PatternSpec,
     PipelineInputError,
     PipelineParams,
     StereoPipeline,
@@ -49,8 +49,20 @@ except ImportError:  # pragma: no cover - interfaces not built
     SymbolArray = None
 
 
-def _d(text: str) -> ParameterDescriptor:
-    return ParameterDescriptor(description=text)
+# Ranges of the extraction.* parameters (rclpy refuses values outside; more checks below).
+EXTRACTION_RANGES: dict[str, tuple[float, float]] = {
+    "block_size": (3, 1001), "offset": (-255.0, 255.0), "open_size": (0, 51),
+    "min_area_px": (0.0, 1e6), "min_area_ratio": (0.0, 100.0), "split_ratio": (1.0, 100.0),
+    "triple_ratio": (1.0, 100.0), "max_area_ratio": (1.0, 1000.0),
+    "split_iterations": (0, 100), "min_split_distance": (0.0, 10.0),
+    "core_radius": (0.0, 10.0), "min_core_fill": (0.0, 1.0), "patch_size": (4, 256),
+}
+
+
+def _extraction_check(name: str, value: Any) -> str | None:
+    if name == "block_size" and int(value) % 2 == 0:
+        return "must be odd (adaptive threshold window)"
+    return None
 
 
 def stamp_ns(header: Any) -> int:
@@ -63,90 +75,92 @@ class DecoderNode(Node):
 
     def __init__(self) -> None:
         super().__init__("decoder")
-        self.declare_parameter("input", "images", _d(
+        self.params = LiveParameters(self)
+        decl = self.params.declare
+        ro = {"read_only": True}
+        self.input_mode = str(decl("input", "images",
             "'images': run extraction + classification in-process on left/right image_raw "
-            "(lowest latency); 'symbols': consume left/right symbols from the stage nodes."))
-        self.declare_parameter("pattern_file", "", _d(
-            "Pattern YAML (contract format); empty = the pattern the package ships."))
-        self.declare_parameter("classifier_weights", "", _d(
-            "Classifier weights from `tactile-sl train`; empty = the shipped ones."))
-        self.declare_parameter("mirrored", False, _d(
-            "The cameras see the artwork mirrored (looking through the elastomer)."))
-        self.declare_parameter("sync_slop", 0.0, _d(
+            "(lowest latency); 'symbols': consume left/right symbols from the stage nodes.",
+            check=lambda v: None if v in ("images", "symbols") else
+            "must be 'images' or 'symbols'", **ro))
+        pattern_file = str(decl("pattern_file", "",
+            "Pattern YAML (contract format); empty = the pattern the package ships.", **ro))
+        allow_invalid = bool(decl("allow_invalid_pattern", False,
+            "Use a pattern file that breaks its own min_hamming / window uniqueness "
+            "(experiments only: cells may be wrong).", **ro))
+        weights = str(decl("classifier_weights", "",
+            "Classifier weights from `tactile-sl train`; empty = the shipped ones. Their "
+            "class count must equal the pattern's symbols.", **ro))
+        params = PipelineParams()
+        self.pipeline_params = params
+        params.decode.mirrored = bool(decl("mirrored", False,
+            "The cameras see the artwork mirrored (looking through the elastomer). A change "
+            "takes a new touch reference.", apply=self._set_mirrored))
+        sync_slop = float(decl("sync_slop", 0.0,
             "Seconds by which left/right stamps may differ when no exactly equal stamp "
-            "exists (0 = exact stamps only, the contract's stereo convention)."))
-        self.declare_parameter("input_depth", 2, _d(
+            "exists (0 = exact stamps only, the contract's stereo convention).", (0.0, 10.0),
+            apply=lambda v: setattr(self.sync, "slop_ns", int(v * 1e9))))
+        input_depth = int(decl("input_depth", 2,
             "QoS history depth of the input subscriptions (sensor data, best effort). Small "
             "keeps latency low when the node falls behind: older frames are replaced by newer "
-            "ones in the middleware instead of queueing up."))
-        self.declare_parameter("queue_size", 5, _d(
-            "Unpaired messages kept per side while waiting for the stereo partner."))
-        self.declare_parameter("max_age", 0.5, _d(
-            "Seconds after which an unpaired message is dropped as stale."))
-        self.declare_parameter("publish_symbols", True, _d(
-            "Publish left/right symbols_decoded (labelled + decoded SymbolArrays)."))
-        self.declare_parameter("publish_patches", False, _d(
-            "Include the glyph patches in symbols_decoded (larger messages)."))
-        self.declare_parameter("publish_empty", True, _d(
-            "Publish a cloud with no point for frames that decoded nothing."))
-        self.declare_parameter("threads", 2, _d(
+            "ones in the middleware instead of queueing up.", (1, 1000), **ro))
+        queue_size = int(decl("queue_size", 5,
+            "Unpaired messages kept per side while waiting for the stereo partner.", (1, 1000),
+            apply=lambda v: setattr(self.sync, "queue_size", int(v))))
+        self._max_wait_s = float(decl("max_age", 0.5,
+            "Seconds after which an unpaired message is dropped as stale.", (0.001, 3600.0),
+            apply=self._set_max_age))
+        self.publish_symbols = bool(decl("publish_symbols", True,
+            "Publish left/right symbols_decoded (labelled + decoded SymbolArrays).", **ro))
+        self.publish_patches = bool(decl("publish_patches", False,
+            "Include the glyph patches in symbols_decoded (larger messages).",
+            apply=lambda v: setattr(self, "publish_patches", bool(v))))
+        self.publish_empty = bool(decl("publish_empty", True,
+            "Publish a cloud with no point for frames that decoded nothing.",
+            apply=lambda v: setattr(self, "publish_empty", bool(v))))
+        params.threads = int(decl("threads", 2,
             "Worker threads for the two images of a frame: 2 extracts and classifies them "
-            "concurrently, 1 = sequential."))
-        self.declare_parameter("cpu_threads", 1, _d(
+            "concurrently, 1 = sequential.", (1, 2), **ro))
+        params.cpu_threads = int(decl("cpu_threads", 1,
             "Intra-op threads of OpenCV and torch in this process (0 = library defaults); "
-            "1 avoids oversubscription on small shared machines."))
-        self.declare_parameter("min_votes", 2, _d(
-            "Agreeing window decodes needed before a glyph gets a cell."))
-        self.declare_parameter("min_component", 16, _d(
-            "Smallest region of mutually consistent decoded glyphs that is kept."))
-        self.declare_parameter("max_reprojection_px", 1.5, _d(
-            "Largest rectified reprojection error of a stereo pair (epipolar gate), px."))
-        self.declare_parameter("warn_period", 5.0, _d(
-            "Seconds between two warnings of the same kind (throttling)."))
-        self.declare_parameter("classifier_threshold", -1.0, _d(
-            "Confidence below which a glyph's label is unknown (255); < 0 = the value stored "
-            "with the weights (input=images, or unlabelled symbols)."))
-        extraction = self._extraction_params()
-
-        gp = self.get_parameter
-        self.input_mode = str(gp("input").value)
-        if self.input_mode not in ("images", "symbols"):
-            raise ValueError(f"parameter input must be 'images' or 'symbols', "
-                             f"got {self.input_mode!r}")
-        params = PipelineParams()
-        params.decode.mirrored = bool(gp("mirrored").value)
-        params.decode.min_votes = int(gp("min_votes").value)
-        params.decode.min_component = int(gp("min_component").value)
-        params.stereo.max_reprojection_px = float(gp("max_reprojection_px").value)
-        params.extraction = extraction
-        params.threads = int(gp("threads").value)
-        params.cpu_threads = int(gp("cpu_threads").value)
-        pattern = PatternSpec.load(str(gp("pattern_file").value) or None)
-        threshold = float(gp("classifier_threshold").value)
-        params.classifier_weights = str(gp("classifier_weights").value) or None
-        params.classifier_threshold = threshold if threshold >= 0 else None
+            "1 avoids oversubscription on small shared machines.", (0, 256), **ro))
+        params.decode.min_votes = int(decl("min_votes", 2,
+            "Agreeing window decodes needed before a glyph gets a cell.", (1, 100),
+            apply=lambda v: setattr(params.decode, "min_votes", int(v))))
+        params.decode.min_component = int(decl("min_component", 16,
+            "Smallest region of mutually consistent decoded glyphs that is kept.",
+            (1, 100000), apply=lambda v: setattr(params.decode, "min_component", int(v))))
+        params.stereo.max_reprojection_px = float(decl("max_reprojection_px", 1.5,
+            "Largest rectified reprojection error of a stereo pair (epipolar gate), px.",
+            (0.01, 1000.0),
+            apply=lambda v: setattr(params.stereo, "max_reprojection_px", float(v))))
+        self.warn_period = float(decl("warn_period", 5.0,
+            "Seconds between two warnings of the same kind (throttling).", (0.0, 3600.0),
+            apply=lambda v: setattr(self, "warn_period", float(v))))
+        threshold = float(decl("classifier_threshold", -1.0,
+            "Confidence below which a glyph's label is unknown (255), in [0, 1]; < 0 = the "
+            "value stored with the weights (input=images, or unlabelled symbols).",
+            (-1.0, 1.0), apply=self._set_threshold))
+        params.extraction = self._extraction_params()
+        pattern = load_pattern_spec(pattern_file or None, allow_invalid)
+        params.classifier_weights = weights or None
+        params.classifier_threshold = check_threshold(threshold)
         self.pipeline = StereoPipeline(pattern, None, params)
-        if self.input_mode == "images":
-            self.pipeline.load_classifier()    # fail at start, not on the first frame
-        self.sync = StereoSync(int(float(gp("sync_slop").value) * 1e9),
-                               int(gp("queue_size").value),
-                               int(float(gp("max_age").value) * 1e9))
-        self.publish_symbols = bool(gp("publish_symbols").value)
-        self.publish_patches = bool(gp("publish_patches").value)
-        self.publish_empty = bool(gp("publish_empty").value)
-        self.warn_period = float(gp("warn_period").value)
+        if self.input_mode == "images":    # fail at start, not on the first frame
+            check_classifier(self.pipeline.load_classifier(), pattern.symbols,
+                             weights or "(shipped)")
+        self.sync = StereoSync(int(sync_slop * 1e9), queue_size, int(self._max_wait_s * 1e9))
         self._last_warn: dict[str, float] = {}
         self.info: dict[str, Any] = {"left": None, "right": None}
         # The newest stereo pair that arrived before any CameraInfo (messages of a frame may
         # come in any order): processed when the calibration arrives, if still fresh.
         self._waiting: tuple[float, Any, Any] | None = None
-        self._max_wait_s = float(gp("max_age").value)
         self.stats = {"frames": 0, "skipped": 0, "dropped": 0, "points": 0, "left": 0,
                       "right": 0}
         self._proc_ms: list[float] = []
 
         sensor = QoSProfile(history=HistoryPolicy.KEEP_LAST,
-                            depth=max(1, int(gp("input_depth").value)),
+                            depth=input_depth,
                             reliability=qos_profile_sensor_data.reliability,
                             durability=qos_profile_sensor_data.durability)
         out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
@@ -182,25 +196,52 @@ class DecoderNode(Node):
         super().destroy_node()
 
     def _extraction_params(self) -> Any:
-        """One ``extraction.<field>`` parameter per ExtractionParams field.
+        """One ``extraction.<field>`` parameter per ExtractionParams field, applied live.
 
-        Same meanings and defaults as the symbol_extractor node's parameters.
+        Same meanings and defaults as the symbol_extractor node's parameters; descriptions
+        come from the dataclass's field docstrings.
         """
         import dataclasses
 
         from tactile_sl_decoder.extraction import ExtractionParams
 
         defaults = ExtractionParams()
+        docs = field_docs(ExtractionParams)
         values = {}
-        for f in dataclasses.fields(defaults):
-            default = getattr(defaults, f.name)
-            if not isinstance(default, (bool, int, float, str)):
-                continue
-            name = f"extraction.{f.name}"
-            self.declare_parameter(name, default, _d(
-                f"Glyph extraction (input=images): {f.name}; see the symbol_extractor node."))
-            values[f.name] = type(default)(self.get_parameter(name).value)
+        for name, default in dataclass_fields(defaults):
+            kind = "Glyph extraction (input=images): "
+            extra: dict[str, Any] = {}
+            if name == "patch_size":           # the classifier's input size
+                extra["read_only"] = True
+            else:
+                extra["apply"] = (lambda v, n=name: self._set_extraction(n, v))
+                extra["check"] = (lambda v, n=name: _extraction_check(n, v))
+            rng = EXTRACTION_RANGES.get(name)
+            values[name] = type(default)(self.params.declare(
+                f"extraction.{name}", default, kind + docs.get(name, name), rng, **extra))
         return dataclasses.replace(defaults, **values)
+
+    def _set_extraction(self, name: str, value: Any) -> None:
+        import dataclasses
+
+        self.pipeline.params.extraction = dataclasses.replace(
+            self.pipeline.params.extraction, **{name: value})
+
+    def _set_max_age(self, value: float) -> None:
+        self._max_wait_s = float(value)
+        self.sync.max_age_ns = int(float(value) * 1e9)
+
+    def _set_threshold(self, value: float) -> None:
+        threshold = check_threshold(value)
+        self.pipeline.params.classifier_threshold = threshold
+        classifier = self.pipeline.classifier
+        if classifier is not None:
+            stored = classifier.meta.get("threshold", classifier.threshold)
+            classifier.threshold = float(stored if threshold is None else threshold)
+
+    def _set_mirrored(self, value: bool) -> None:
+        self.pipeline.params.decode.mirrored = bool(value)
+        self.touch.restart(mirrored=bool(value))
 
     # ------------------------------------------------------------------ callbacks
 

@@ -44,14 +44,24 @@ except ImportError:
     StaticTransformBroadcaster = None
 
 
-def _float(text: str, low: float, high: float) -> ParameterDescriptor:
-    return ParameterDescriptor(description=text, floating_point_range=[
+def _float(text: str, low: float, high: float, read_only: bool = False) -> ParameterDescriptor:
+    return ParameterDescriptor(description=text, read_only=read_only, floating_point_range=[
         FloatingPointRange(from_value=low, to_value=high)])
 
 
-def _int(text: str, low: int, high: int) -> ParameterDescriptor:
-    return ParameterDescriptor(description=text, integer_range=[
+def _int(text: str, low: int, high: int, read_only: bool = False) -> ParameterDescriptor:
+    return ParameterDescriptor(description=text, read_only=read_only, integer_range=[
         IntegerRange(from_value=low, to_value=high, step=1)])
+
+
+_START_ONLY = " Applies at start only (read-only): the reference is taken with it."
+
+
+def _hysteresis(values: dict[str, Any]) -> str | None:
+    on, off = values.get("contact_force_on"), values.get("contact_force_off")
+    if on is not None and off is not None and off > on:
+        return f"contact_force_off ({off}) must not exceed contact_force_on ({on})"
+    return None
 
 
 def _stamp(msg: Any, fields: dict[str, Any]) -> None:
@@ -115,6 +125,7 @@ class TouchOutputs:
     def __init__(self, node: Node, shape: tuple[int, int], pitch: float, mirrored: bool,
                  out_qos: QoSProfile) -> None:
         self.node = node
+        self.shape, self.pitch = shape, pitch
         d = node.declare_parameter
         d("touch", True, ParameterDescriptor(
             description="Publish field, wrench, contact, depth and pad_pose (needs an "
@@ -123,25 +134,43 @@ class TouchOutputs:
             description="Sensor YAML (elastomer, pad frame); empty = the shipped one",
             read_only=True))
         d("reference_frames", 1, _int("Decoded frames averaged into the untouched reference "
-                                      "(at start and after each tare)", 1, 1000))
+                                      "(at start and after each tare)." + _START_ONLY, 1, 1000,
+                                      read_only=True))
         d("elastomer.youngs_modulus", -1.0, _float(
-            "Pa; overrides the sensor file (< 0 = the file's value)", -1.0, 1e12))
+            "Pa; overrides the sensor file (< 0 = the file's value)." + _START_ONLY, -1.0, 1e12,
+            read_only=True))
         d("elastomer.poisson_ratio", -1.0, _float(
-            "Overrides the sensor file (< 0 = the file's value), 0..0.5", -1.0, 0.5))
+            "Overrides the sensor file (< 0 = the file's value), 0..0.5." + _START_ONLY,
+            -1.0, 0.5, read_only=True))
         d("elastomer.thickness", -1.0, _float(
             "m, layer bonded to a rigid window, 0 = half-space; overrides the sensor file "
-            "(< 0 = the file's value)", -1.0, 1.0))
+            "(< 0 = the file's value)." + _START_ONLY, -1.0, 1.0, read_only=True))
         d("pad_frame", "", ParameterDescriptor(
             description="Frame id of the touch outputs; empty = the sensor file's",
             read_only=True))
         defaults = TouchParams()
-        d("contact_force_on", defaults.contact.force_on, _float(
-            "N: in_contact turns on above this normal force", 1e-4, 100.0))
-        d("contact_force_off", defaults.contact.force_off, _float(
-            "N: in_contact turns off below this normal force (hysteresis)", 1e-4, 100.0))
-        d("tare_max_depth", defaults.tare_max_depth, _float(
-            "m: a tare is refused while the pad is pressed in deeper than this (or in "
-            "contact)", 1e-7, 0.01))
+        live = getattr(node, "params", None)
+        if live is not None:       # the node's one parameter mechanism: applied live
+            live.declare("contact_force_on", defaults.contact.force_on,
+                         "N: in_contact turns on above this normal force", (1e-4, 100.0),
+                         apply=lambda v: self._set("force_on", v))
+            live.declare("contact_force_off", defaults.contact.force_off,
+                         "N: in_contact turns off below this normal force (hysteresis; "
+                         "<= contact_force_on)", (1e-4, 100.0),
+                         apply=lambda v: self._set("force_off", v))
+            live.declare("tare_max_depth", defaults.tare_max_depth,
+                         "m: a tare is refused while the pad is pressed in deeper than this "
+                         "(or in contact)", (1e-7, 0.01),
+                         apply=lambda v: self._set("tare_max_depth", v))
+            live.check_together(_hysteresis)
+        else:
+            d("contact_force_on", defaults.contact.force_on, _float(
+                "N: in_contact turns on above this normal force", 1e-4, 100.0))
+            d("contact_force_off", defaults.contact.force_off, _float(
+                "N: in_contact turns off below this normal force (hysteresis)", 1e-4, 100.0))
+            d("tare_max_depth", defaults.tare_max_depth, _float(
+                "m: a tare is refused while the pad is pressed in deeper than this (or in "
+                "contact)", 1e-7, 0.01))
         gp = node.get_parameter
         self.enabled = bool(gp("touch").value)
         self.announced_waiting = False
@@ -176,6 +205,25 @@ class TouchOutputs:
             f"touch: E {e.youngs_modulus:.3g} Pa, nu {e.poisson_ratio:.3g}, "
             f"{'half-space' if e.thickness == 0 else f'layer {e.thickness * 1e3:.3g} mm'} "
             f"({sensor.source}); pad frame {self.frame_id}")
+
+    def _set(self, name: str, value: float) -> None:
+        """Apply a live touch setting to the running stage."""
+        if not self.enabled:
+            return
+        if name == "tare_max_depth":
+            self.stage.params.tare_max_depth = float(value)
+        else:
+            setattr(self.stage.params.contact, name, float(value))
+
+    def restart(self, mirrored: bool) -> None:
+        """A new stage (new reference from the next frames) after a change of ``mirrored``."""
+        if not self.enabled:
+            return
+        self.stage = TouchStage(self.stage.sensor, self.shape, self.pitch, mirrored,
+                                self.stage.params)
+        self.announced_waiting = False
+        self.node.get_logger().info("mirrored changed: the touch reference is taken again "
+                                    "from the next decoded frames (the pad must be untouched)")
 
     def _on_tare(self, _request: Any, response: Any) -> Any:
         ok, text = self.stage.tare()
