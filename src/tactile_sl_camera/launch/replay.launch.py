@@ -15,9 +15,14 @@ def generate_launch_description():
     params = os.path.join(get_package_share_directory("tactile_sl_camera"), "config", "replay.yaml")
     return LaunchDescription([
         DeclareLaunchArgument("bag", description="MCAP bag to replay"),
-        DeclareLaunchArgument("namespace", default_value="tactile"),
-        DeclareLaunchArgument("rate", default_value="1.0"),
-        DeclareLaunchArgument("loop", default_value="false"),
+        DeclareLaunchArgument("namespace", default_value="tactile",
+                              description="namespace of the node and its topics"),
+        DeclareLaunchArgument("rate", default_value="1.0",
+                              description="playback speed (1 = recorded, 0 = as fast as possible)"),
+        DeclareLaunchArgument("loop", default_value="false",
+                              description="start over at the end (implies restamp)"),
+        DeclareLaunchArgument("restamp", default_value="false",
+                              description="stamp frames with their publication time"),
         Node(
             package="tactile_sl_camera",
             executable="replay",
@@ -26,6 +31,7 @@ def generate_launch_description():
                 "bag": LaunchConfiguration("bag"),
                 "rate": LaunchConfiguration("rate"),
                 "loop": LaunchConfiguration("loop"),
+                "restamp": LaunchConfiguration("restamp"),
             }],
             output="screen",
         ),

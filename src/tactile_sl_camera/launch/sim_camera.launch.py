@@ -20,7 +20,14 @@ def generate_launch_description():
         "scenes_file": "",
         "scene": "",
     }
-    declared = [DeclareLaunchArgument(k, default_value=v) for k, v in args.items()]
+    descriptions = {
+        "namespace": "namespace of the node and its topics",
+        "params_file": "parameters YAML (default: the package's config/sim_camera.yaml)",
+        "scenes_file": "scenes YAML; empty = the built-in sphere press",
+        "scene": "scene name in scenes_file; empty = the first",
+    }
+    declared = [DeclareLaunchArgument(k, default_value=v, description=descriptions[k])
+                for k, v in args.items()]
     node = Node(
         package="tactile_sl_camera", executable="sim_camera", name="sim_camera",
         namespace=LaunchConfiguration("namespace"), output="screen",

@@ -23,7 +23,16 @@ def generate_launch_description():
         "left_camera_info_url": "",
         "right_camera_info_url": "",
     }
-    declared = [DeclareLaunchArgument(k, default_value=v) for k, v in args.items()]
+    descriptions = {
+        "namespace": "namespace of the node and its topics",
+        "params_file": "parameters YAML (default: the package's config/stereo_camera.yaml)",
+        "left_device": "left camera: index, /dev/v4l/by-id/... path or video file",
+        "right_device": "right camera: index, /dev/v4l/by-id/... path or video file",
+        "left_camera_info_url": "camera_calibration YAML of the left camera",
+        "right_camera_info_url": "camera_calibration YAML of the right camera",
+    }
+    declared = [DeclareLaunchArgument(k, default_value=v, description=descriptions[k])
+                for k, v in args.items()]
     strings = ("left_device", "right_device", "left_camera_info_url", "right_camera_info_url")
     node = Node(
         package="tactile_sl_camera", executable="stereo_camera", name="stereo_camera",

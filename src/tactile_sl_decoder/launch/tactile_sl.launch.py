@@ -31,20 +31,27 @@ def generate_launch_description() -> LaunchDescription:
     replay_yaml = os.path.join(camera_share, "config", "replay.yaml")
     camera_yaml = os.path.join(camera_share, "config", "stereo_camera.yaml")
     return LaunchDescription([
-        DeclareLaunchArgument("namespace", default_value="/tactile"),
+        DeclareLaunchArgument("namespace", default_value="/tactile",
+                              description="namespace of every node and topic"),
         DeclareLaunchArgument("source", default_value="replay",
                               description="replay (a bag) or camera"),
         DeclareLaunchArgument("bag", default_value="", description="bag for source:=replay"),
         DeclareLaunchArgument("rate", default_value="1.0", description="replay speed"),
-        DeclareLaunchArgument("loop", default_value="false"),
+        DeclareLaunchArgument("loop", default_value="false",
+                              description="replay: start over at the end (implies restamp)"),
+        DeclareLaunchArgument("restamp", default_value="false",
+                              description="replay: stamp frames with their publication time"),
         DeclareLaunchArgument("stages", default_value="false",
-                              description="chain the extraction/classification stage nodes"),
-        DeclareLaunchArgument("mirrored", default_value="false"),
+                              description="true/false (any ROS boolean spelling): chain the "
+                              "extraction/classification stage nodes"),
+        DeclareLaunchArgument("mirrored", default_value="false",
+                              description="the cameras see the artwork mirrored"),
         Node(
             package="tactile_sl_camera", executable="replay", name="replay", namespace=ns,
             parameters=[replay_yaml, {"bag": LaunchConfiguration("bag"),
                                       "rate": LaunchConfiguration("rate"),
-                                      "loop": LaunchConfiguration("loop")}],
+                                      "loop": LaunchConfiguration("loop"),
+                                      "restamp": LaunchConfiguration("restamp")}],
             condition=IfCondition(EqualsSubstitution(LaunchConfiguration("source"), "replay")),
             output="screen"),
         Node(
@@ -60,7 +67,8 @@ def generate_launch_description() -> LaunchDescription:
         Node(
             package="tactile_sl_decoder", executable="decoder", name="decoder", namespace=ns,
             parameters=[decoder_yaml, {
-                "input": PythonExpression(["'symbols' if '", stages, "' == 'true' else 'images'"]),
+                "input": PythonExpression(["'symbols' if '", stages,
+                                           "'.strip().lower() in ('true', '1') else 'images'"]),
                 "mirrored": LaunchConfiguration("mirrored")}],
             remappings=[("left/symbols", "left/labelled_symbols"),
                         ("right/symbols", "right/labelled_symbols")],

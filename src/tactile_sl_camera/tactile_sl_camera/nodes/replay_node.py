@@ -53,7 +53,7 @@ class ReplayNode(Node):
             "With loop: number of passes over the bag, then stop (0 = forever)."))
         self.declare_parameter("restamp", False, _described(
             "Stamp each stereo frame with the time it is published (all messages of a frame "
-            "get the same new stamp), as a live camera would."))
+            "get the same new stamp), as a live camera would. Always on with loop."))
         self.declare_parameter("reliability", "best_effort", _described(
             "QoS reliability of the publishers: best_effort (sensor data) or reliable."))
         self.declare_parameter("depth", 5, _described("QoS history depth of the publishers."))
@@ -80,6 +80,12 @@ class ReplayNode(Node):
         self.loop = bool(p("loop").value)
         self.loops = int(p("loops").value)
         self.restamp = bool(p("restamp").value)
+        if self.loop and not self.restamp:
+            # A second pass would repeat the recorded stamps: consumers (the decoder's stereo
+            # sync, TF, rosbag2) see time go backwards and drop the frames as stale.
+            self.restamp = True
+            self.get_logger().info("loop implies restamp: every pass is stamped with the time "
+                                   "it is published, so stamps keep moving forward")
         self.exit_on_end = bool(p("exit_on_end").value)
         self.wait_timeout = float(p("wait_timeout").value)
 
