@@ -19,3 +19,12 @@ for bag in "$ROOT"/bags/*.mcap; do
     exit 1
   fi
 done
+# Robustness scenes (issue 11: nuisances of real sensors), small: < 2 MB each.
+tactile-sl synth "$ROOT/bags/robust_scenes.yaml" -o "$ROOT/bags" --artwork "$ART"
+for bag in "$ROOT"/bags/robust_*.mcap; do
+  size=$(stat -c %s "$bag")
+  if [ "$size" -ge 2000000 ]; then
+    echo "make_bags: $bag is $size bytes (limit 2 MB for robustness bags)" >&2
+    exit 1
+  fi
+done

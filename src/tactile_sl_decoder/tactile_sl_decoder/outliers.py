@@ -39,7 +39,7 @@ class OutlierParams:
     enabled: bool = True
     min_tolerance_m: float = 1e-4   # floor of the residual tolerance (~1 px of disparity)
     mad_factor: float = 8.0          # tolerance in robust standard deviations of the frame
-    local_factor: float = 4.0        # and this many times the neighbours' median residual
+    local_factor: float = 2.0        # and this many times the neighbours' median residual
     passes: int = 6                  # repeat with the dropped points removed
 
 
