@@ -101,46 +101,195 @@ def _set_threads(n: int) -> None:
         pass
 
 
+class Floor:
+    """The unavoidable work of one stereo pair, timed on the same frames as the pipeline.
+
+    Per pair: the adaptive threshold (box mean minus offset, as the extractor's, without the
+    opening) and connected components with statistics on both images, one batched classifier
+    pass over every glyph patch of both images, the triangulation (rectification + linear
+    least squares) of the cells both images decoded, and -- with touch outputs -- the touch
+    stage's two matrix-vector products (resultant and force map of
+    :meth:`~tactile_sl_decoder.touch.traction.TractionSolver.solve`).  ``serial`` runs it on
+    one thread; ``parallel`` thresholds and labels the two images in two threads, as the
+    pipeline's workers do.
+    """
+
+    def __init__(self, pipe, parallel: bool) -> None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        from tactile_sl_decoder.extraction import ExtractionParams
+
+        self.pipe = pipe
+        self.params = ExtractionParams(open_size=0)
+        self.pool = ThreadPoolExecutor(max_workers=1) if parallel else None
+
+    def _regions(self, gray: np.ndarray) -> int:
+        import cv2
+
+        from tactile_sl_decoder.extraction import threshold_ink
+
+        mask = threshold_ink(gray, self.params)
+        return cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, cv2.CV_32S,
+                                                             cv2.CCL_BBDT)[0]
+
+    def __call__(self, left: np.ndarray, right: np.ndarray, res, rig, solver,
+                 disp: np.ndarray | None) -> dict[str, float]:
+        """Milliseconds of each part and their sum (``floor``) for one stereo pair."""
+        cols = self.pipe.codebook.cols
+        patches = [g.patches for g in (res.left, res.right) if g.patches is not None and len(g)]
+        patches = np.concatenate(patches) if patches else np.zeros((0, 18, 18), np.uint8)
+        cl = np.where(res.left.row >= 0, res.left.row.astype(np.int64) * cols + res.left.col,
+                      -1)
+        cr = np.where(res.right.row >= 0,
+                      res.right.row.astype(np.int64) * cols + res.right.col, -1)
+        il, ir = np.flatnonzero(cl >= 0), np.flatnonzero(cr >= 0)
+        _, a, b = np.intersect1d(cl[il], cr[ir], assume_unique=True, return_indices=True)
+        uv_l = np.column_stack([res.left.u, res.left.v]).astype(np.float64)[il[a]]
+        uv_r = np.column_stack([res.right.u, res.right.v]).astype(np.float64)[ir[b]]
+        classifier = self.pipe.load_classifier()
+        t0 = time.perf_counter()
+        if self.pool is None:
+            self._regions(left)
+            self._regions(right)
+        else:
+            fut = self.pool.submit(self._regions, right)
+            self._regions(left)
+            fut.result()
+        t1 = time.perf_counter()
+        classifier.predict(patches)
+        t2 = time.perf_counter()
+        rig.triangulate(uv_l, uv_r)
+        t3 = time.perf_counter()
+        if solver is not None and disp is not None:
+            u = disp.reshape(-1)
+            solver._wrench_rows @ u                      # noqa: B018 (the product is timed)
+            solver._map @ u.astype(np.float32)           # noqa: B018
+        t4 = time.perf_counter()
+        out = {"threshold+cc": t1 - t0, "classify": t2 - t1, "triangulate": t3 - t2,
+               "touch mat-vec": t4 - t3, "floor": t4 - t0}
+        return {k: 1e3 * v for k, v in out.items()}
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
+
+
 def in_process(args: argparse.Namespace) -> int:
-    """Per-stage timing over all frames, and the accuracy table."""
+    """Per-stage timing over all frames, the floor, and the accuracy table."""
     from tactile_sl_camera.images import to_gray
     from tactile_sl_decoder.e2e_metrics import aggregate, format_table, frame_metrics
     from tactile_sl_decoder.pipeline import bag_frames
 
     _set_threads(args.cpu_threads)
     pipe = _pipeline(args)
+    floors = {"serial": Floor(pipe, parallel=False), "parallel": Floor(pipe, parallel=True)}
     stages = ("check", "extract", "knn", "classify", "workers", "decode", "stereo", "total")
-    timings: dict[str, list[float]] = {s: [] for s in stages}
+    timings: dict[str, list[float]] = {s: [] for s in stages + ("touch", "total+touch",
+                                                                  "cpu+touch")}
+    floor_t: dict[str, dict[str, list[float]]] = {k: {} for k in floors}
+    paired: dict[str, list[float]] = {"total": [], "total+touch": []}   # as the floors
     tables = []
     glyphs = []
+    load0 = os.getloadavg()
+    t_run = time.perf_counter()
     for bag in _bags(args):
         frames = list(bag_frames(bag))
+        stage = _touch_stage(pipe) if args.touch else None
         metrics = []
         for fr in frames:
             left, right = to_gray(fr.left_image), to_gray(fr.right_image)
             for rep in range(args.warmup + args.repeat):
+                c0 = time.process_time()
+                t0 = time.perf_counter()
                 res = pipe.process(left, right, fr.left_info, fr.right_info)
-                if rep >= args.warmup:
-                    for s in stages:
-                        timings[s].append(res.timings_ms.get(s, 0.0))
+                t1 = time.perf_counter()
+                touch = _update(stage, res.points) if stage is not None else None
+                t2 = time.perf_counter()
+                c1 = time.process_time()
+                if rep < args.warmup:
+                    continue
+                for s in stages:
+                    timings[s].append(res.timings_ms.get(s, 0.0))
+                if stage is None or touch is not None:     # frames with touch outputs
+                    timings["touch"].append(1e3 * (t2 - t1))
+                    timings["total+touch"].append(1e3 * (t2 - t0))
+                    timings["cpu+touch"].append(1e3 * (c1 - c0))
+                    paired["total"].append(res.timings_ms["total"])
+                    paired["total+touch"].append(1e3 * (t2 - t0))
+                    solver = stage.solver if stage is not None else None
+                    disp = stage.last_solve[0] if stage is not None and stage.last_solve else None
+                    # the two floors alternate which runs first (cache warmth)
+                    order = list(floors) if rep % 2 else list(floors)[::-1]
+                    for name in order:
+                        parts = floors[name](left, right, res, pipe.rig(fr.left_info,
+                                                                        fr.right_info),
+                                             solver, disp)
+                        for k, v in parts.items():
+                            floor_t[name].setdefault(k, []).append(v)
             glyphs.append(len(res.left) + len(res.right))
             if fr.ground_truth is not None:
                 metrics.append(frame_metrics(res.points, fr.ground_truth,
                                              0.5 * pipe.pattern.pitch_m, fr.stamp_ns))
         if metrics:
             tables.append(aggregate(pathlib.Path(bag).stem, metrics))
+    load1 = os.getloadavg()
     print(f"in-process, {len(timings['total'])} stereo pairs (median glyphs per pair "
           f"{int(np.median(glyphs))}), threads={args.threads}, cpu_threads={args.cpu_threads}, "
-          f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
-    print(f"{'stage':<10} {'median ms':>10} {'p90 ms':>8} {'min ms':>8}")
-    for s in stages:
-        v = np.asarray(timings[s])
-        print(f"{s:<10} {np.median(v):>10.2f} {np.percentile(v, 90):>8.2f} {v.min():>8.2f}")
+          f"{time.perf_counter() - t_run:.0f} s; load average {load0[0]:.2f} before, "
+          f"{load1[0]:.2f} after, on {os.cpu_count()} CPUs")
+    print(f"{'stage':<14} {'median ms':>10} {'p90 ms':>8} {'min ms':>8}")
+    rows = list(stages)
+    if args.touch:
+        rows += ["touch", "total+touch", "cpu+touch"]
+    for s in rows:
+        _row(s, timings[s])
+    for name, parts in floor_t.items():
+        print(f"floor, {name} ({'one thread' if name == 'serial' else 'two images in two threads'},"
+              f" pairs with touch outputs):")
+        for k, v in parts.items():
+            _row("  " + k, v)
+    print("total / floor, pairs with touch outputs (ratio of medians; median of the per-pair "
+          "ratios):")
+    for name, parts in floor_t.items():
+        fl = np.asarray(parts["floor"]) if parts else np.full(1, np.nan)
+        for label in (("total", "total+touch") if args.touch else ("total",)):
+            tot = np.asarray(paired[label])
+            print(f"  {label:<12} / floor {name:<8} {np.median(tot) / np.median(fl):>5.2f} "
+                  f"({np.median(tot / fl):.2f})")
     if tables:
         print()
         format_table(tables)
+    for f in floors.values():
+        f.close()
     pipe.close()
     return 0
+
+
+def _row(label: str, values: list[float]) -> None:
+    v = np.asarray(values)
+    if len(v) == 0:
+        return
+    print(f"{label:<14} {np.median(v):>10.2f} {np.percentile(v, 90):>8.2f} {v.min():>8.2f}")
+
+
+def _update(stage, points: np.ndarray):
+    """``stage.update`` as replay calls it: a failed reference starts a new one."""
+    from tactile_sl_decoder.touch.reference import ReferenceError
+
+    try:
+        return stage.update(points)
+    except ReferenceError:
+        stage.tare()
+        return None
+
+
+def _touch_stage(pipe):
+    """A touch stage for the pipeline's pattern with the shipped sensor (as replay)."""
+    from tactile_sl_decoder.touch.sensor import load_sensor
+    from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
+
+    return TouchStage(load_sensor(None), pipe.pattern.array.shape, pipe.pattern.pitch_m,
+                      bool(pipe.params.decode.mirrored), TouchParams(reference_frames=1))
 
 
 def flips(args: argparse.Namespace) -> int:
@@ -282,6 +431,9 @@ def main() -> int:
                    help="OpenCV / torch intra-op threads (0 = library defaults)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per frame")
     p.add_argument("--warmup", type=int, default=1, help="untimed runs per frame first")
+    p.add_argument("--no-touch", dest="touch", action="store_false",
+                   help="time the pipeline alone (default: also the touch stage, "
+                   "TouchStage.update after every frame, as the node and replay)")
     p.add_argument("--flip", type=float, default=0.0, help="label-flip robustness run")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--ros", action="store_true", help="measure through the ROS graph")
