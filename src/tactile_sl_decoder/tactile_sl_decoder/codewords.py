@@ -28,6 +28,9 @@ from dataclasses import dataclass
 from itertools import combinations, product
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.grid import Grid, window_indices
 
@@ -293,6 +296,20 @@ class CodewordDecoder:
     def __init__(self, codebook: Codebook, params: DecodeParams | None = None) -> None:
         self.codebook = codebook
         self.params = params or DecodeParams()
+        # per image count: the cell layout and the pattern value of every internal cell,
+        # built once and reused across frames (read-only)
+        self._layouts: dict[tuple[int, int], tuple[_Layout, np.ndarray]] = {}
+
+    def _layout(self, groups: int) -> tuple[_Layout, np.ndarray]:
+        """Cell layout for ``groups`` images and the pattern value of each of its cells."""
+        cb = self.codebook
+        key = (id(cb), groups)
+        if key not in self._layouts:
+            lay = _Layout(cb.rows, cb.cols, groups)
+            if len(self._layouts) >= 4:
+                self._layouts.clear()
+            self._layouts[key] = (lay, lay.values(cb.array))
+        return self._layouts[key]
 
     def decode(self, grid: Grid, labels: np.ndarray, confidence: np.ndarray,
                groups: np.ndarray | None = None) -> Decoded:
@@ -307,7 +324,7 @@ class CodewordDecoder:
         n = grid.nbr.shape[0]
         groups = (np.zeros(n, dtype=np.int64) if groups is None
                   else np.asarray(groups, dtype=np.int64).reshape(-1))
-        lay = _Layout(cb.rows, cb.cols, int(groups.max()) + 1 if n else 1)
+        lay, values = self._layout(int(groups.max()) + 1 if n else 1)
         labels = np.asarray(labels).astype(np.int64).reshape(-1)
         confidence = np.asarray(confidence, dtype=np.float64).reshape(-1)
         row = np.full(n, CELL_UNKNOWN, dtype=np.int32)
@@ -352,7 +369,6 @@ class CodewordDecoder:
         links = _links(pgrid.nbr)
         cell = self._consistency(pgrid.nbr, cell, lay, links)
         cell = self._islands(pgrid, cell, lay, links)
-        values = lay.values(cb.array)
         grew = False
         for _ in range(p.grow_iterations):
             grown = self._grow(pgrid.nbr, cell, lab, lay, values, links)
@@ -411,9 +427,6 @@ class CodewordDecoder:
         the largest region's lattice predicts there, or it is dropped too (a locally
         consistent but misplaced patch, e.g. a misread that copies another pattern area).
         """
-        from scipy.sparse import csr_matrix
-        from scipy.sparse.csgraph import connected_components
-
         p = self.params
         n = len(cell)
         dec = np.flatnonzero(cell >= 0)
@@ -441,7 +454,6 @@ class CodewordDecoder:
             others_dec = dec[~is_main[comp[dec]] & keep[dec]]
             main_idx = dec[main_dec]
             if len(others_dec) and len(main_idx):
-                from scipy.spatial import cKDTree
                 tree = cKDTree(grid.pts[main_idx])
                 dist, nn = tree.query(grid.pts[others_dec],
                                       distance_upper_bound=p.island_check_px * grid.spacing_px)

@@ -161,3 +161,27 @@ def test_mirrored_setting_reverses_columns(codebook):
     assert np.all((d.row == R) & (d.col == C))
     d = _run(CodewordDecoder(codebook, DecodeParams(mirrored=False)), lab, u, v)
     assert d.decoded.sum() == 0
+
+
+def test_a_decoder_reused_across_frames_and_image_counts_decodes_like_a_new_one(codebook):
+    """The decoder keeps per-frame tables between calls: reuse must not change any cell."""
+    u, v, R, C = _scene()
+    frames = []
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        lab = PATTERN[R, C].copy()
+        flip = rng.random(len(lab)) < 0.1
+        lab[flip] = (lab[flip] + rng.integers(1, 3, flip.sum())) % 3
+        frames.append(lab)
+    reused = CodewordDecoder(codebook)
+    two = np.concatenate([u, u + 1e4]), np.concatenate([v, v])
+    for lab in frames + frames[::-1]:
+        for labels, (uu, vv), groups in ((lab, (u, v), None),
+                                         (np.concatenate([lab, lab[::-1]]), two,
+                                          np.repeat([0, 1], len(u)))):
+            conf = np.full(len(uu), 0.95, np.float32)
+            grid = build_grid(uu, vv)
+            a = reused.decode(grid, labels, conf, groups)
+            b = CodewordDecoder(codebook).decode(grid, labels, conf, groups)
+            assert np.array_equal(a.row, b.row) and np.array_equal(a.col, b.col)
+            assert a.decoded.sum() > 0
