@@ -143,7 +143,7 @@ def _io(ros):
     return pubs, clouds
 
 
-def _wait_matched(ros, pubs, timeout=15.0):
+def _wait_matched(ros, pubs, timeout=40.0):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if all(p.get_subscription_count() > 0 for p in pubs.values()):
