@@ -11,7 +11,7 @@ import importlib
 import sys
 from typing import Sequence
 
-# (module, package that provides it); a subcommand whose module is not installed is omitted.
+# Subcommand modules in help order; one whose package is not installed is omitted.
 SUBCOMMAND_MODULES: tuple[str, ...] = (
     "tactile_sl_decoder.cli.pattern_cmd",
     "tactile_sl_camera.cli.synth_cmd",
@@ -19,7 +19,6 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "tactile_sl_decoder.cli.train_cmd",
     "tactile_sl_decoder.cli.evaluate_cmd",
     "tactile_sl_decoder.cli.replay_cmd",
-    "tactile_sl_camera.cli.bag_cmd",
 )
 
 
