@@ -243,13 +243,14 @@ def in_process(args: argparse.Namespace) -> int:
         rows += ["touch", "total+touch", "cpu+touch"]
     for s in rows:
         _row(s, timings[s])
+    which = "pairs with touch outputs" if args.touch else "all pairs"
     for name, parts in floor_t.items():
         print(f"floor, {name} ({'one thread' if name == 'serial' else 'two images in two threads'},"
-              f" pairs with touch outputs):")
+              f" {which}):")
         for k, v in parts.items():
-            _row("  " + k, v)
-    print("total / floor, pairs with touch outputs (ratio of medians; median of the per-pair "
-          "ratios):")
+            if args.touch or k != "touch mat-vec":
+                _row("  " + k, v)
+    print(f"total / floor, {which} (ratio of medians; median of the per-pair ratios):")
     for name, parts in floor_t.items():
         fl = np.asarray(parts["floor"]) if parts else np.full(1, np.nan)
         for label in (("total", "total+touch") if args.touch else ("total",)):
