@@ -11,6 +11,13 @@ and the end-to-end accuracy table (coverage, wrong cells, 3-D error against grou
 With --threads 2 (the default, as the node) each image runs in its own worker: extract,
 knn (the lattice's k-NN search + rectification of the glyph centres) and classify are then
 the slower worker's times, which overlap; "workers" is the wall time of that part.
+With touch outputs (the default; --no-touch leaves them out) the touch stage runs after
+every frame as in the node and replay ("touch", "total+touch"; "cpu+touch" is the process
+CPU time of both). In the same run and on the same frames: the floor, the work no decoder
+of this design can avoid (threshold + connected components of both images, one batched
+classifier pass over all their patches, triangulation of the matched cells, the touch
+stage's two matrix-vector products), on one thread and with the two images' labelling in
+two threads, and total / floor (see docs/decoder.md, "Floor and total / floor").
 
 --flip R: after classification, each known label is flipped to another symbol with
 probability R (same pipeline otherwise); prints coverage and wrong cells with and without.
