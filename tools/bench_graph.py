@@ -4,10 +4,17 @@ Both are the installed executables, run as separate processes (namespace /tactil
 loopback DDS, private domain). The replay restamps every stereo frame with the time it is
 published, so latency = arrival time of the cloud here - its stamp. A frame is dropped if
 no cloud with its stamp arrives. Figures, not a pass/fail test.
+
+    python tools/bench_graph.py --rate 3 --seconds 60    # 30 Hz for 60 s
+    python tools/bench_graph.py --rate 6 --seconds 60    # 60 Hz
+
+Also printed: CPU use of the decoder and the replay processes over the run (per cent of
+one CPU) and the decoder's resident memory when its first cloud arrives and at the end.
 """
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import pathlib
 import subprocess
@@ -35,11 +42,15 @@ def main() -> int:
     parser.add_argument("--rate", type=float, default=3.0,
                         help="replay rate multiplier (the bags are 10 Hz: 3.0 = 30 Hz)")
     parser.add_argument("--loops", type=int, default=43, help="passes over the bag")
+    parser.add_argument("--seconds", type=float, default=0.0,
+                        help="play this long instead (sets --loops from the bag's frames)")
     parser.add_argument("--domain-id", type=int, default=int(os.environ.get("BENCH_DOMAIN_ID", 29)))
     parser.add_argument("--logs", type=pathlib.Path, default=REPO / "out" / "bench_graph")
     args = parser.parse_args()
     args.logs.mkdir(parents=True, exist_ok=True)
     frames_per_pass = count_bag_frames(args.bag)
+    if args.seconds > 0:
+        args.loops = max(1, math.ceil(args.seconds * 10.0 * args.rate / frames_per_pass))
     expected = frames_per_pass * args.loops
 
     context = Context()
@@ -48,15 +59,18 @@ def main() -> int:
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     latency_ms: dict[int, float] = {}
+    samples: dict[str, dict[str, tuple[float, float, float]]] = {"start": {}, "end": {}}
+    procs: list[subprocess.Popen] = []
 
     def on_cloud(msg: PointCloud2) -> None:
         stamp = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
         latency_ms.setdefault(stamp, (time.time_ns() - stamp) / 1e6)
+        if not samples["start"]:
+            samples["start"] = _sample(procs)
 
     node.create_subscription(PointCloud2, "points", on_cloud,
                              QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
     env = ros_env(args.domain_id)
-    procs = []
     try:
         procs.append(subprocess.Popen(
             [str(executable("tactile_sl_decoder", "decoder")), "--ros-args", "-r",
@@ -74,11 +88,18 @@ def main() -> int:
             env=env, stdout=open(args.logs / "replay.log", "w"), stderr=subprocess.STDOUT)
         procs.append(replay)
         deadline = time.monotonic() + 60 + expected / (10.0 * args.rate) * 3
-        while replay.poll() is None and time.monotonic() < deadline:
+        next_sample = time.monotonic()
+        while time.monotonic() < deadline:
+            if time.monotonic() >= next_sample:    # the last sample before the replay ends
+                samples["end"].update(_sample(procs))
+                next_sample += 1.0
+            if replay.poll() is not None:
+                break
             executor.spin_once(timeout_sec=0.02)
         end = time.monotonic() + 1.0
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.02)
+        samples["end"].update(_sample(procs))
     finally:
         for proc in reversed(procs):
             stop(proc)
@@ -93,8 +114,35 @@ def main() -> int:
     print(f"clouds received {len(lat)}, dropped {expected - len(lat)}")
     if len(lat):
         print(f"latency image stamp -> cloud received: median {np.median(lat):.1f} ms, "
-              f"p99 {np.percentile(lat, 99):.1f} ms, max {lat.max():.1f} ms")
+              f"p90 {np.percentile(lat, 90):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "
+              f"max {lat.max():.1f} ms")
+    start, end = samples["start"], samples["end"]
+    for name in ("decoder", "replay"):
+        if name in start and name in end:
+            (t0, cpu0, rss0), (t1, cpu1, rss1) = start[name], end[name]
+            print(f"{name}: CPU {100 * (cpu1 - cpu0) / max(t1 - t0, 1e-9):.0f} % of one CPU "
+                  f"from the first cloud on ({t1 - t0:.0f} s); resident memory "
+                  f"{rss0:.1f} MB at the first cloud, {rss1:.1f} MB at the end "
+                  f"({rss1 - rss0:+.1f} MB)")
     return 0 if len(lat) == expected else 1
+
+
+def _sample(procs: list[subprocess.Popen]) -> dict[str, tuple[float, float, float]]:
+    """(wall s, CPU s, resident MB) of the decoder (procs[0]) and the replay (procs[1])."""
+    out = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    for name, proc in zip(("decoder", "replay"), procs):
+        try:
+            stat = pathlib.Path(f"/proc/{proc.pid}/stat").read_text()
+            fields = stat.rsplit(")", 1)[1].split()
+            cpu = (int(fields[11]) + int(fields[12])) / tick       # utime + stime
+            status = pathlib.Path(f"/proc/{proc.pid}/status").read_text()
+        except (OSError, IndexError, ValueError):
+            continue
+        rss = next((int(line.split()[1]) / 1024.0 for line in status.splitlines()
+                    if line.startswith("VmRSS:")), float("nan"))   # none once it has exited
+        out[name] = (time.monotonic(), cpu, rss)
+    return out
 
 
 if __name__ == "__main__":
