@@ -3,16 +3,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from rcl_interfaces.msg import ParameterDescriptor
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 
 from ..camera_info import fill_camera_info
-
-
-def declare(node: Any, name: str, default: Any, description: str) -> Any:
-    """Declare a documented parameter and return its value."""
-    node.declare_parameter(name, default, ParameterDescriptor(description=description))
-    return node.get_parameter(name).value
 
 
 def _header(msg: Any, stamp: Any, frame_id: str) -> None:

@@ -128,3 +128,14 @@ def dataclass_fields(obj: Any) -> list[tuple[str, Any]]:
     """(name, default) of the scalar fields of a dataclass instance."""
     return [(f.name, getattr(obj, f.name)) for f in dataclasses.fields(obj)
             if isinstance(getattr(obj, f.name), (bool, int, float, str))]
+
+
+FRAME_PREFIX_DOC = ("Prepended to every frame id this node publishes (e.g. 'left_hand_'), so "
+                    "several sensors on one robot have distinct frames; empty = none.")
+
+
+def frame_prefix_check(prefix: str) -> str | None:
+    """Why ``prefix`` cannot start frame ids (None when it can)."""
+    if prefix.startswith("/") or any(c.isspace() for c in prefix):
+        return "a frame id prefix has no leading '/' and no spaces (REP 105 frame names)"
+    return None

@@ -13,14 +13,19 @@ import time
 from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.serialization import deserialize_message, serialize_message
 
 from tactile_sl_camera.bag_io import BagError, stamp_to_ns
 from tactile_sl_camera.nodes import stop
+from tactile_sl_camera.nodes.parameters import (
+    FRAME_PREFIX_DOC,
+    LiveParameters,
+    frame_prefix_check,
+)
 from tactile_sl_camera.nodes.runner import run_node
-from tactile_sl_camera.replay import ReplayPlan, Restamper
+from tactile_sl_camera.replay import HEADER_FIRST_TYPES, ReplayPlan, Restamper
 
 
 def message_class(schema_name: str) -> Any:
@@ -29,8 +34,20 @@ def message_class(schema_name: str) -> Any:
     return getattr(importlib.import_module(f"{package}.{kind}"), name)
 
 
-def _described(text: str) -> ParameterDescriptor:
-    return ParameterDescriptor(description=text)
+def prefix_frame_id(cdr: bytes, schema_name: str, prefix: str) -> bytes:
+    """The message with ``prefix`` prepended to its ``header.frame_id`` (CDR in and out)."""
+    cls = message_class(schema_name)
+    msg = deserialize_message(cdr, cls)
+    msg.header.frame_id = prefix + msg.header.frame_id
+    return serialize_message(msg)
+
+
+def _type_check(name: str) -> str | None:
+    try:
+        message_class(name)
+    except (ValueError, ImportError, AttributeError):
+        return "not a message type (package/msg/Name) importable here"
+    return None
 
 
 class ReplayNode(Node):
@@ -38,62 +55,67 @@ class ReplayNode(Node):
 
     def __init__(self) -> None:
         super().__init__("replay")
-        self.declare_parameter("bag", "", _described(
-            "Path of the MCAP bag (file, or rosbag2 directory holding one .mcap)."))
-        self.declare_parameter("topics", [""], _described(
+        live = LiveParameters(self)
+        ro = {"read_only": True}
+        bag = str(live.declare("bag", "",
+            "Path of the MCAP bag (file, or rosbag2 directory holding one .mcap).", **ro))
+        topics = [t for t in live.declare("topics", [""],
             "Bag topics to play (absolute, or relative to bag_namespace). "
-            "Empty: every sensor_msgs/Image and CameraInfo topic."))
-        self.declare_parameter("bag_namespace", "/tactile", _described(
-            "Prefix stripped from bag topic names to form the relative published names."))
-        self.declare_parameter("rate", 1.0, _described(
+            "Empty: every sensor_msgs/Image and CameraInfo topic.", **ro) if t]
+        bag_namespace = str(live.declare("bag_namespace", "/tactile",
+            "Prefix stripped from bag topic names to form the relative published names.", **ro))
+        rate = float(live.declare("rate", 1.0,
             "Playback speed: 1.0 = recorded rate, 2.0 = twice as fast, 0 = as fast as "
-            "possible (combine with wait_for_topic to go as fast as a subscriber keeps up)."))
-        self.declare_parameter("loop", False, _described("Start over at the end of the bag."))
-        self.declare_parameter("loops", 0, _described(
-            "With loop: number of passes over the bag, then stop (0 = forever)."))
-        self.declare_parameter("restamp", False, _described(
+            "possible (combine with wait_for_topic to go as fast as a subscriber keeps up).",
+            (0.0, 1000.0), **ro))
+        self.loop = bool(live.declare("loop", False,
+            "Start over at the end of the bag (implies restamp).", **ro))
+        self.loops = int(live.declare("loops", 0,
+            "With loop: number of passes over the bag, then stop (0 = forever); a change "
+            "counts the passes already played.", (0, 1_000_000_000),
+            apply=lambda v: setattr(self, "loops", int(v))))
+        self.restamp = bool(live.declare("restamp", False,
             "Stamp each stereo frame with the time it is published (all messages of a frame "
-            "get the same new stamp), as a live camera would. Always on with loop."))
-        self.declare_parameter("reliability", "best_effort", _described(
-            "QoS reliability of the publishers: best_effort (sensor data) or reliable."))
-        self.declare_parameter("depth", 5, _described("QoS history depth of the publishers."))
-        self.declare_parameter("wait_for_subscribers", 0, _described(
-            "Before playing, wait until every played topic has at least this many subscribers."))
-        self.declare_parameter("wait_for_subscribers_timeout", 10.0, _described(
-            "Seconds to wait for subscribers before playing anyway."))
-        self.declare_parameter("wait_for_topic", "", _described(
+            "get the same new stamp), as a live camera would. Always on with loop.", **ro))
+        reliability = str(live.declare("reliability", "best_effort",
+            "QoS reliability of the publishers: best_effort (sensor data) or reliable.",
+            check=lambda v: None if v in ("best_effort", "reliable") else
+            "must be best_effort or reliable", **ro))
+        depth = int(live.declare("depth", 5, "QoS history depth of the publishers.",
+                                 (1, 10000), **ro))
+        self.min_subscribers = int(live.declare("wait_for_subscribers", 0,
+            "Before playing, wait until every played topic has at least this many "
+            "subscribers.", (0, 1000), **ro))
+        self.subscribers_timeout = float(live.declare("wait_for_subscribers_timeout", 10.0,
+            "Seconds to wait for subscribers before playing anyway.", (0.0, 3600.0), **ro))
+        pace_topic = str(live.declare("wait_for_topic", "",
             "Pacing: after each stereo frame, wait for a message on this topic carrying the "
-            "frame's header stamp (e.g. 'points'), so playback never outruns the consumer."))
-        self.declare_parameter("wait_for_type", "sensor_msgs/msg/PointCloud2", _described(
-            "Message type of wait_for_topic (its first field must be a std_msgs/Header)."))
-        self.declare_parameter("wait_timeout", 1.0, _described(
-            "Seconds to wait for the pacing message before moving on (logged)."))
-        self.declare_parameter("exit_on_end", True, _described(
-            "Shut the node down when the bag has been played (and loop is false)."))
+            "frame's header stamp (e.g. 'points'), so playback never outruns the consumer.",
+            **ro))
+        pace_type = str(live.declare("wait_for_type", "sensor_msgs/msg/PointCloud2",
+            "Message type of wait_for_topic (its first field must be a std_msgs/Header).",
+            check=_type_check, **ro))
+        self.wait_timeout = float(live.declare("wait_timeout", 1.0,
+            "Seconds to wait for the pacing message before moving on (logged).",
+            (0.001, 3600.0), apply=lambda v: setattr(self, "wait_timeout", float(v))))
+        self.frame_prefix = str(live.declare("frame_prefix", "", FRAME_PREFIX_DOC +
+            " Applied to the recorded frame_id of every played message.",
+            check=frame_prefix_check, **ro))
+        self.exit_on_end = bool(live.declare("exit_on_end", True,
+            "Shut the node down when the bag has been played (and loop is false).",
+            apply=lambda v: setattr(self, "exit_on_end", bool(v))))
 
-        p = self.get_parameter
-        bag = p("bag").value
         if not bag:
             raise BagError("parameter 'bag' is empty: give the path of an MCAP bag")
-        self.plan = ReplayPlan(bag, [t for t in p("topics").value if t],
-                               p("bag_namespace").value, float(p("rate").value))
-        self.loop = bool(p("loop").value)
-        self.loops = int(p("loops").value)
-        self.restamp = bool(p("restamp").value)
+        self.plan = ReplayPlan(bag, topics, bag_namespace, rate)
         if self.loop and not self.restamp:
             # A second pass would repeat the recorded stamps: consumers (the decoder's stereo
             # sync, TF, rosbag2) see time go backwards and drop the frames as stale.
             self.restamp = True
             self.get_logger().info("loop implies restamp: every pass is stamped with the time "
                                    "it is published, so stamps keep moving forward")
-        self.exit_on_end = bool(p("exit_on_end").value)
-        self.wait_timeout = float(p("wait_timeout").value)
-
-        reliability = str(p("reliability").value)
-        if reliability not in ("best_effort", "reliable"):
-            raise ValueError(f"reliability must be best_effort or reliable, not {reliability!r}")
         qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST, depth=int(p("depth").value),
+            history=HistoryPolicy.KEEP_LAST, depth=depth,
             reliability=(ReliabilityPolicy.RELIABLE if reliability == "reliable"
                          else qos_profile_sensor_data.reliability),
             durability=qos_profile_sensor_data.durability)
@@ -103,13 +125,9 @@ class ReplayNode(Node):
 
         self._acked: set[int] = set()
         self._ack = threading.Condition()
-        pace_topic = p("wait_for_topic").value
         self.pacing = bool(pace_topic)
         if self.pacing:
-            self.create_subscription(message_class(p("wait_for_type").value), pace_topic,
-                                     self._on_pace, 10)
-        self.min_subscribers = int(p("wait_for_subscribers").value)
-        self.subscribers_timeout = float(p("wait_for_subscribers_timeout").value)
+            self.create_subscription(message_class(pace_type), pace_topic, self._on_pace, 10)
         self.done = threading.Event()
         self._done_at: float | None = None
         self._stopping = threading.Event()
@@ -200,6 +218,8 @@ class ReplayNode(Node):
             if not self._running():
                 return
             data, stamp = restamper(item) if restamper else (item.data, item.stamp_ns)
+            if self.frame_prefix and item.schema_name in HEADER_FIRST_TYPES:
+                data = prefix_frame_id(data, item.schema_name, self.frame_prefix)
             self.publishers_by_topic[item.topic].publish(data)
             self.published += 1
             recorded, published = item.stamp_ns, stamp

@@ -21,7 +21,8 @@ from tactile_sl_camera.nodes.runner import run_node
 from ..sim.artwork import ArtworkError
 from ..sim.scenes import SceneError, load_scenes, parse_scene
 from ..sim.synth import FrameIds, RendererCache, frame_messages, render_scene_frame
-from .camera_common import camera_info_msg, cloud_msg, declare, image_msg
+from .camera_common import camera_info_msg, cloud_msg, image_msg
+from .parameters import FRAME_PREFIX_DOC, LiveParameters, frame_prefix_check
 
 BUILTIN_SCENE = {
     "name": "sphere_press", "frames": 20, "fps": 10,
@@ -36,22 +37,33 @@ class SimCameraNode(Node):
 
     def __init__(self) -> None:
         super().__init__("sim_camera")
-        scenes_file = str(declare(self, "scenes_file", "", "Scenes YAML (see docs/camera.md); "
-                                  "empty = a built-in sphere press/hold/release."))
-        scene_name = str(declare(self, "scene", "", "Scene to play; empty = the first."))
-        artwork = str(declare(self, "artwork", "", "Artwork PNG with .png.yaml sidecar; empty "
-                              "= share/tactile_sl_camera/artwork/pattern.png."))
-        rate = float(declare(self, "rate", 0.0, "Frames per second; 0 = the scene's fps."))
-        self.loop = bool(declare(self, "loop", True, "Start the scene over at its end."))
-        self.publish_truth = bool(declare(self, "publish_ground_truth", True,
-                                          "Publish ground_truth/points."))
-        self.cache = bool(declare(self, "cache_frames", True, "Render each frame once and "
-                                  "replay it when looping (noise then repeats)."))
-        encoding = str(declare(self, "encoding", "", "mono8 or bgr8; empty = the scene's."))
-        self.ids = FrameIds(
-            str(declare(self, "left_frame_id", "tactile_left_optical_frame", "Left frame_id.")),
-            str(declare(self, "right_frame_id", "tactile_right_optical_frame",
-                        "Right frame_id.")))
+        live = LiveParameters(self)
+        ro = {"read_only": True}
+        scenes_file = str(live.declare("scenes_file", "", "Scenes YAML (see docs/camera.md); "
+                                       "empty = a built-in sphere press/hold/release.", **ro))
+        scene_name = str(live.declare("scene", "", "Scene to play; empty = the first.", **ro))
+        artwork = str(live.declare("artwork", "", "Artwork PNG with .png.yaml sidecar; empty = "
+                                   "share/tactile_sl_camera/artwork/pattern.png.", **ro))
+        rate = float(live.declare("rate", 0.0, "Frames per second; 0 = the scene's fps.",
+                                  (0.0, 1000.0), apply=self._set_rate))
+        self.loop = bool(live.declare("loop", True, "Start the scene over at its end.",
+                                      apply=lambda v: setattr(self, "loop", bool(v))))
+        self.publish_truth = bool(live.declare("publish_ground_truth", True,
+                                               "Publish ground_truth/points.", **ro))
+        self.cache = bool(live.declare("cache_frames", True, "Render each frame once and "
+                                       "replay it when looping (noise then repeats).",
+                                       apply=lambda v: setattr(self, "cache", bool(v))))
+        encoding = str(live.declare("encoding", "", "mono8 or bgr8; empty = the scene's.",
+                                    check=lambda v: None if v in ("", "mono8", "bgr8") else
+                                    "must be mono8, bgr8 or empty", **ro))
+        left_frame = str(live.declare("left_frame_id", "tactile_left_optical_frame",
+                                      "Left frame_id (after frame_prefix).", **ro))
+        right_frame = str(live.declare("right_frame_id", "tactile_right_optical_frame",
+                                       "Right frame_id (after frame_prefix).", **ro))
+        prefix = str(live.declare("frame_prefix", "", FRAME_PREFIX_DOC,
+                                  check=frame_prefix_check, **ro))
+        self.ids = FrameIds(prefix + left_frame, prefix + right_frame,
+                            prefix + FrameIds().pad)
         if scenes_file:
             scenes = load_scenes(scenes_file)
             by_name = {s.name: s for s in scenes}
@@ -62,8 +74,6 @@ class SimCameraNode(Node):
         else:
             self.scene = parse_scene(dict(BUILTIN_SCENE))
         if encoding:
-            if encoding not in ("mono8", "bgr8"):
-                raise SceneError(f"encoding must be mono8 or bgr8, not {encoding!r}")
             self.scene.encoding = encoding
         self.period = 1.0 / (rate if rate > 0 else self.scene.fps)
         self.renderer = RendererCache(artwork or None).get(self.scene)
@@ -87,6 +97,9 @@ class SimCameraNode(Node):
             f"simulating scene {self.scene.name!r} ({self.scene.frames} frames, "
             f"{1 / self.period:g} fps, {self.scene.encoding}"
             f"{', looping' if self.loop else ''}) from {self.renderer.artwork.source}")
+
+    def _set_rate(self, value: float) -> None:
+        self.period = 1.0 / (value if value > 0 else self.scene.fps)
 
     def _messages(self, index: int) -> list[tuple[str, str, dict[str, Any]]]:
         if index in self._frames:

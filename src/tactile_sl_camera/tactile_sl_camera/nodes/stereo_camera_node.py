@@ -27,7 +27,8 @@ from ..camera_info import (
 )
 from ..images import image_fields
 from ..stereo_capture import CaptureConfig, StereoCapture
-from .camera_common import camera_info_msg, declare, image_msg
+from .camera_common import camera_info_msg, image_msg
+from .parameters import FRAME_PREFIX_DOC, LiveParameters, frame_prefix_check
 
 
 class StereoCameraNode(Node):
@@ -35,31 +36,45 @@ class StereoCameraNode(Node):
 
     def __init__(self) -> None:
         super().__init__("stereo_camera")
+        live = LiveParameters(self)
+        ro = {"read_only": True}
         cfg = CaptureConfig(
-            left_device=str(declare(self, "left_device", "0",
-                                    "Left camera: index (0), device path or video file/URL.")),
-            right_device=str(declare(self, "right_device", "1",
-                                     "Right camera (ignored when side_by_side).")),
-            side_by_side=bool(declare(self, "side_by_side", False,
-                                      "One device delivering left|right side by side.")),
-            width=int(declare(self, "width", 640, "Width of one camera's image, pixels.")),
-            height=int(declare(self, "height", 480, "Image height, pixels.")),
-            fps=float(declare(self, "fps", 30.0, "Frame rate requested and maximum rate "
-                              "published (video files are paced to it).")),
-            encoding=str(declare(self, "encoding", "mono8", "Output pixel format: mono8 or "
-                                 "bgr8.")),
-            fourcc=str(declare(self, "fourcc", "", "Device pixel format, e.g. MJPG; empty = "
-                               "driver default.")),
-            reopen_interval=float(declare(self, "reopen_interval", 1.0,
-                                          "Seconds between attempts to reopen a lost device.")))
-        self.frame_ids = (
-            str(declare(self, "left_frame_id", "tactile_left_optical_frame",
-                        "frame_id of the left images and camera_info.")),
-            str(declare(self, "right_frame_id", "tactile_right_optical_frame",
-                        "frame_id of the right images and camera_info.")))
-        urls = (str(declare(self, "left_camera_info_url", "", "camera_calibration YAML of the "
-                            "left camera (file://, package:// or a path); empty = uncalibrated.")),
-                str(declare(self, "right_camera_info_url", "", "Same for the right camera.")))
+            left_device=str(live.declare("left_device", "0", "Left camera: index (0), device "
+                                         "path (/dev/v4l/by-id/...) or video file/URL.", **ro)),
+            right_device=str(live.declare("right_device", "1", "Right camera (ignored when "
+                                          "side_by_side).", **ro)),
+            side_by_side=bool(live.declare("side_by_side", False, "One device delivering "
+                                           "left|right side by side.", **ro)),
+            width=int(live.declare("width", 640, "Width of one camera's image, pixels.",
+                                   (1, 16384), **ro)),
+            height=int(live.declare("height", 480, "Image height, pixels.", (1, 16384), **ro)),
+            fps=float(live.declare("fps", 30.0, "Frame rate requested and maximum rate "
+                                   "published (video files are paced to it).", (0.01, 1000.0),
+                                   **ro)),
+            encoding=str(live.declare("encoding", "mono8", "Output pixel format: mono8 or bgr8.",
+                                      check=lambda v: None if v in ("mono8", "bgr8") else
+                                      "must be mono8 or bgr8", **ro)),
+            fourcc=str(live.declare("fourcc", "", "Device pixel format, e.g. MJPG; empty = "
+                                    "driver default.", check=lambda v: None if len(v) in (0, 4)
+                                    else "must be four characters (e.g. MJPG) or empty", **ro)),
+            reopen_interval=float(live.declare(
+                "reopen_interval", 1.0, "Seconds between attempts to reopen a lost device.",
+                (0.01, 3600.0), apply=self._set_reopen_interval)))
+        frames = (
+            str(live.declare("left_frame_id", "tactile_left_optical_frame",
+                             "frame_id of the left images and camera_info (after "
+                             "frame_prefix).", **ro)),
+            str(live.declare("right_frame_id", "tactile_right_optical_frame",
+                             "frame_id of the right images and camera_info (after "
+                             "frame_prefix).", **ro)))
+        prefix = str(live.declare("frame_prefix", "", FRAME_PREFIX_DOC,
+                                  check=frame_prefix_check, **ro))
+        self.frame_ids = (prefix + frames[0], prefix + frames[1])
+        urls = (str(live.declare("left_camera_info_url", "", "camera_calibration YAML of the "
+                                 "left camera (file://, package:// or a path); empty = "
+                                 "uncalibrated.", **ro)),
+                str(live.declare("right_camera_info_url", "", "Same for the right camera.",
+                                 **ro)))
         self.calibrations = [self._load_info(url, side, cfg)
                              for url, side in zip(urls, ("left", "right"))]
         self.capture = StereoCapture(cfg, log=self._log)
@@ -77,6 +92,9 @@ class StereoCameraNode(Node):
         self.get_logger().info(
             f"stereo camera: {'side-by-side ' + repr(cfg.left_device) if cfg.side_by_side else f'{cfg.left_device!r} + {cfg.right_device!r}'}"  # noqa: E501
             f", {cfg.width}x{cfg.height} {cfg.encoding} at up to {cfg.fps:g} fps")
+
+    def _set_reopen_interval(self, value: float) -> None:
+        self.cfg.reopen_interval = float(value)
 
     def _log(self, level: str, text: str) -> None:
         # one call site per severity: rclpy refuses a severity change at the same call site

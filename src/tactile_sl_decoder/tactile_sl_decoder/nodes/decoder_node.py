@@ -29,9 +29,18 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 
 from tactile_sl_camera.clouds import cloud_fields
 from tactile_sl_camera.images import ImageFormatError, to_gray
-from tactile_sl_camera.nodes.parameters import LiveParameters, dataclass_fields, field_docs
+from tactile_sl_camera.nodes.parameters import (
+    FRAME_PREFIX_DOC,
+    LiveParameters,
+    dataclass_fields,
+    field_docs,
+    frame_prefix_check,
+)
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.checks import check_classifier, check_threshold, load_pattern_spec
+from tactile_sl_decoder.nodes.diagnostics import DecoderDiagnostics, DiagnosticLimits, Status
+from tactile_sl_decoder.nodes.diagnostics_publisher import DiagnosticsPublisher
+from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
 from tactile_sl_decoder.nodes.touch_outputs import TouchOutputs
 from tactile_sl_decoder.pipeline import (
     Glyphs,
@@ -47,22 +56,6 @@ try:
     from tactile_sl_msgs.msg import SymbolArray
 except ImportError:  # pragma: no cover - interfaces not built
     SymbolArray = None
-
-
-# Ranges of the extraction.* parameters (rclpy refuses values outside; more checks below).
-EXTRACTION_RANGES: dict[str, tuple[float, float]] = {
-    "block_size": (3, 1001), "offset": (-255.0, 255.0), "open_size": (0, 51),
-    "min_area_px": (0.0, 1e6), "min_area_ratio": (0.0, 100.0), "split_ratio": (1.0, 100.0),
-    "triple_ratio": (1.0, 100.0), "max_area_ratio": (1.0, 1000.0),
-    "split_iterations": (0, 100), "min_split_distance": (0.0, 10.0),
-    "core_radius": (0.0, 10.0), "min_core_fill": (0.0, 1.0), "patch_size": (4, 256),
-}
-
-
-def _extraction_check(name: str, value: Any) -> str | None:
-    if name == "block_size" and int(value) % 2 == 0:
-        return "must be odd (adaptive threshold window)"
-    return None
 
 
 def stamp_ns(header: Any) -> int:
@@ -91,6 +84,10 @@ class DecoderNode(Node):
         weights = str(decl("classifier_weights", "",
             "Classifier weights from `tactile-sl train`; empty = the shipped ones. Their "
             "class count must equal the pattern's symbols.", **ro))
+        self.frame_prefix = str(decl("frame_prefix", "", FRAME_PREFIX_DOC +
+            " Here: the pad frame of the touch outputs (the cloud keeps the left CameraInfo's "
+            "frame, which the camera driver prefixes) and the diagnostics' hardware_id.",
+            check=frame_prefix_check, **ro))
         params = PipelineParams()
         self.pipeline_params = params
         params.decode.mirrored = bool(decl("mirrored", False,
@@ -142,6 +139,13 @@ class DecoderNode(Node):
             "value stored with the weights (input=images, or unlabelled symbols).",
             (-1.0, 1.0), apply=self._set_threshold))
         params.extraction = self._extraction_params()
+        diag_period = float(decl("diagnostic_period", 1.0,
+            "Seconds between two DiagnosticArrays on /diagnostics (docs/diagnostics.md).",
+            (0.1, 60.0), **ro))
+        self.diag = DecoderDiagnostics(self._diagnostic_limits(), time.monotonic())
+        from tactile_sl_decoder.calibrate.health import HealthLimits
+
+        self.health_min_points = HealthLimits().min_points
         pattern = load_pattern_spec(pattern_file or None, allow_invalid)
         params.classifier_weights = weights or None
         params.classifier_threshold = check_threshold(threshold)
@@ -185,6 +189,15 @@ class DecoderNode(Node):
                 self.create_subscription(SymbolArray, f"{side}/symbols",
                                          lambda m, s=side: self._on_frame(s, m), sensor)
         self.create_timer(10.0, self._report)
+        # Calibration health (calibrate/health.py) is judged on the first frame decoded in
+        # both images after start, a tare, a change of mirrored or of the CameraInfo: the
+        # frame the touch reference is taken from (the pad untouched).
+        self._health_pending = True
+        self._info_key: dict[str, tuple] = {}
+        self._tares_seen = 0
+        self.diagnostics = DiagnosticsPublisher(
+            self, self._diagnostic_statuses, diag_period,
+            self.frame_prefix.strip("_/") or self.get_namespace().strip("/") or self.get_name())
         self.get_logger().info(
             f"decoder ready: input={self.input_mode}, pattern {pattern.array.shape[0]}x"
             f"{pattern.array.shape[1]} (window {pattern.window[0]}x{pattern.window[1]}, "
@@ -196,30 +209,25 @@ class DecoderNode(Node):
         super().destroy_node()
 
     def _extraction_params(self) -> Any:
-        """One ``extraction.<field>`` parameter per ExtractionParams field, applied live.
+        """One live ``extraction.<field>`` parameter per ExtractionParams field.
 
-        Same meanings and defaults as the symbol_extractor node's parameters; descriptions
-        come from the dataclass's field docstrings.
+        Same meanings, defaults and ranges as the symbol_extractor node's parameters.
         """
+        return declare_extraction(self.params, "extraction.", self._set_extraction,
+                                  "Glyph extraction (input=images): ")
+
+    def _diagnostic_limits(self) -> DiagnosticLimits:
+        """One live ``diagnostics.<field>`` parameter per DiagnosticLimits threshold."""
         import dataclasses
 
-        from tactile_sl_decoder.extraction import ExtractionParams
-
-        defaults = ExtractionParams()
-        docs = field_docs(ExtractionParams)
-        values = {}
-        for name, default in dataclass_fields(defaults):
-            kind = "Glyph extraction (input=images): "
-            extra: dict[str, Any] = {}
-            if name == "patch_size":           # the classifier's input size
-                extra["read_only"] = True
-            else:
-                extra["apply"] = (lambda v, n=name: self._set_extraction(n, v))
-                extra["check"] = (lambda v, n=name: _extraction_check(n, v))
-            rng = EXTRACTION_RANGES.get(name)
-            values[name] = type(default)(self.params.declare(
-                f"extraction.{name}", default, kind + docs.get(name, name), rng, **extra))
-        return dataclasses.replace(defaults, **values)
+        limits = DiagnosticLimits()
+        docs = field_docs(DiagnosticLimits)
+        for name, default in dataclass_fields(limits):
+            setattr(limits, name, float(self.params.declare(
+                f"diagnostics.{name}", float(default),
+                "Diagnostics threshold: " + docs.get(name, name), (0.0, 1e6),
+                apply=lambda v, n=name: setattr(self.diag.limits, n, float(v)))))
+        return dataclasses.replace(limits)
 
     def _set_extraction(self, name: str, value: Any) -> None:
         import dataclasses
@@ -242,6 +250,7 @@ class DecoderNode(Node):
     def _set_mirrored(self, value: bool) -> None:
         self.pipeline.params.decode.mirrored = bool(value)
         self.touch.restart(mirrored=bool(value))
+        self._health_pending = True
 
     # ------------------------------------------------------------------ callbacks
 
@@ -254,6 +263,14 @@ class DecoderNode(Node):
 
     def _on_info(self, side: str, msg: CameraInfo) -> None:
         self.info[side] = msg
+        self.diag.camera_info(side)
+        key = (tuple(msg.k), tuple(msg.d), tuple(msg.r), tuple(msg.p), msg.width, msg.height)
+        if self._info_key.get(side) != key:
+            if side in self._info_key:
+                self.get_logger().info(f"{side} CameraInfo changed: the calibration health "
+                                       "is checked again on the next decoded frame")
+            self._info_key[side] = key
+            self._health_pending = True
         if self._waiting is not None and self._calibrated():
             since, left, right = self._waiting
             self._waiting = None
@@ -261,6 +278,7 @@ class DecoderNode(Node):
                 self._process(left, right)
             else:
                 self.stats["skipped"] += 1
+                self.diag.skipped("CameraInfo came later than max_age")
                 stamp = left.header.stamp
                 self.warn("info-late", f"frame {stamp.sec}.{stamp.nanosec:09d} skipped: its "
                           f"CameraInfo came more than max_age ({self._max_wait_s} s) after it")
@@ -270,12 +288,14 @@ class DecoderNode(Node):
 
     def _on_frame(self, side: str, msg: Any) -> None:
         self.stats[side] += 1
+        self.diag.message(side, time.monotonic())
         ev = self.sync.add(side, stamp_ns(msg.header), msg)
         if ev.reset:
             self.warn("time-jump", "input stamps jumped back in time (bag replayed or looped?): "
                       "stereo pairing restarted")
         for s, stamp, reason in ev.dropped:
             self.stats["dropped"] += 1
+            self.diag.dropped(s)
             self.warn(f"drop-{reason}", f"dropped {s} frame {stamp / 1e9:.6f}: {reason}")
         for _, left, right in ev.pairs:
             if not self._calibrated():
@@ -301,6 +321,7 @@ class DecoderNode(Node):
                     self.info["left"], self.info["right"])
         except (PipelineInputError, ImageFormatError, ValueError) as exc:
             self.stats["skipped"] += 1
+            self.diag.skipped(str(exc))
             kind = type(exc).__name__ + str(exc).split(":")[0][:40]
             self.warn(kind, f"frame {stamp[0]}.{stamp[1]:09d} skipped: {exc}")
             return
@@ -321,7 +342,56 @@ class DecoderNode(Node):
                                       ("right", result.right, right_msg)):
                 self.pub_sym[side].publish(make_symbol_array(glyphs, src.header,
                                                              self.publish_patches))
-        self._proc_ms.append(1e3 * (time.perf_counter() - t0))
+        proc_s = time.perf_counter() - t0
+        self._proc_ms.append(1e3 * proc_s)
+        latency_s = (self.get_clock().now().nanoseconds - stamp_ns(left_msg.header)) * 1e-9
+        self.diag.frame(proc_s, latency_s, result.left, result.right, len(result.points),
+                        result.rejected_pairs)
+        if self.touch.enabled and self.touch.tares != self._tares_seen:
+            self._tares_seen = self.touch.tares
+            self._health_pending = True
+        if self._health_pending:
+            self._check_calibration(result)
+
+    def _check_calibration(self, result: StereoResult) -> None:
+        """Calibration health on this (untouched) frame; logged, kept for /diagnostics."""
+        from tactile_sl_decoder.calibrate.health import calibration_health
+        from tactile_sl_decoder.calibrate.views import PatternTarget
+
+        try:
+            rig = self.pipeline.rig(self.info["left"], self.info["right"])
+        except (PipelineInputError, ValueError):
+            return
+        target = PatternTarget(self.pipeline.pattern, self.pipeline.params.decode.mirrored)
+        report = calibration_health(result.left, result.right, rig, target)
+        if report.points < self.health_min_points and not any(
+                "swapped" in p for p in report.problems):
+            self.diag.calibration_waiting(f"only {report.points} cells decoded in both images "
+                                          f"(needs {self.health_min_points})")
+            return
+        self._health_pending = False
+        status = self.diag.calibration_checked(report)
+        text = f"calibration health {status.level_name}: {status.message}"
+        if status.level == 0:
+            self.get_logger().info(text)
+        else:
+            self.get_logger().warning(text + " (docs/calibration.md, tactile-sl calibrate "
+                                      "--check)")
+
+    def _diagnostic_statuses(self) -> list[Status]:
+        t = self.touch
+        if t.enabled:
+            ref = t.stage.reference
+            pose = ref.pose if ref is not None else None
+            self.diag.touch_state(
+                True, ref is not None, t.stage.params.reference_frames,
+                len(ref.cells) if ref is not None else 0,
+                pose.residual_rms if pose is not None else float("nan"),
+                pose.residual_max if pose is not None else float("nan"),
+                t.tares, t.last_tare)
+        else:
+            self.diag.touch_state(False)
+        return self.diag.statuses(time.monotonic())
 
     def _report(self) -> None:
         if not self._proc_ms and not self.stats["skipped"]:

@@ -3,17 +3,18 @@
 Topics (relative): ``symbols`` in, ``labelled_symbols`` out (tactile_sl_msgs/SymbolArray,
 reliable). Each glyph gets the CNN's label and its softmax confidence; below ``threshold``
 the label is 255 (unknown), for the decoder to correct. Parameters in
-config/symbol_classifier.yaml. A message without patches, or with patches of another size
+config/symbol_classifier.yaml (``threshold`` and ``keep_patches`` apply live).
+A message without patches, or with patches of another size
 than the network's 18x18, or with inconsistent arrays, is skipped with a warning.
 """
 from __future__ import annotations
 
 import time
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from tactile_sl_camera.nodes.parameters import LiveParameters
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.classifier import PATCH, Classifier
 from tactile_sl_decoder.symbol_array import SymbolArrayError, fill_message, from_message
@@ -25,28 +26,35 @@ class SymbolClassifierNode(Node):
 
     def __init__(self) -> None:
         super().__init__("symbol_classifier")
-        self.declare_parameter("weights", "", ParameterDescriptor(
-            description="Weights file from `tactile-sl train`; empty = the shipped ones."))
-        self.declare_parameter("threshold", -1.0, ParameterDescriptor(
-            description="Confidence below which the label is 255; < 0 = the value stored "
-            "with the weights (0.9 for the shipped ones)."))
-        self.declare_parameter("keep_patches", False, ParameterDescriptor(
-            description="Forward the patches (debugging); the decoder does not need them."))
-        self.declare_parameter("threads", 1, ParameterDescriptor(
-            description="torch CPU threads for inference (1 meets the budget on one core)."))
+        live = LiveParameters(self)
+        weights = str(live.declare(
+            "weights", "", "Weights file from `tactile-sl train`; empty = the shipped ones.",
+            read_only=True)) or None
+        threshold = float(live.declare(
+            "threshold", -1.0, "Confidence below which the label is 255, in [0, 1]; < 0 = the "
+            "value stored with the weights (0.9 for the shipped ones).", (-1.0, 1.0),
+            apply=self._set_threshold))
+        self.keep_patches = bool(live.declare(
+            "keep_patches", False, "Forward the patches (debugging); the decoder does not "
+            "need them.", apply=lambda v: setattr(self, "keep_patches", bool(v))))
+        threads = int(live.declare(
+            "threads", 1, "torch CPU threads for inference (1 meets the budget on one core).",
+            (1, 256), read_only=True))
         import torch
 
-        torch.set_num_threads(max(1, int(self.get_parameter("threads").value)))
-        weights = str(self.get_parameter("weights").value) or None
-        threshold = float(self.get_parameter("threshold").value)
-        self.classifier = Classifier.load(weights, threshold if threshold >= 0 else None)
-        self.keep_patches = bool(self.get_parameter("keep_patches").value)
+        torch.set_num_threads(threads)
+        self.classifier = Classifier.load(weights)
+        self.stored_threshold = float(self.classifier.threshold)
+        self._set_threshold(threshold)
         self.pub = self.create_publisher(SymbolArray, "labelled_symbols", QoSProfile(depth=10))
         self.sub = self.create_subscription(SymbolArray, "symbols", self.on_symbols,
                                             QoSProfile(depth=10))
         self.get_logger().info(f"classifier {self.classifier.meta.get('arch')} with "
                                f"{self.classifier.classes} classes, threshold "
                                f"{self.classifier.threshold:.2f}")
+
+    def _set_threshold(self, value: float) -> None:
+        self.classifier.threshold = float(self.stored_threshold if value < 0 else value)
 
     def on_symbols(self, msg: SymbolArray) -> None:
         """Classify and republish; unusable messages are logged and skipped."""

@@ -174,6 +174,8 @@ class TouchOutputs:
         gp = node.get_parameter
         self.enabled = bool(gp("touch").value)
         self.announced_waiting = False
+        self.tares = 0             # tares accepted (the reference is taken again)
+        self.last_tare = ""        # the answer to the last tare request
         if not self.enabled:
             return
 
@@ -189,7 +191,7 @@ class TouchOutputs:
         params.contact.force_off = float(gp("contact_force_off").value)
         params.tare_max_depth = float(gp("tare_max_depth").value)
         self.stage = TouchStage(sensor, shape, pitch, mirrored, params)
-        self.frame_id = sensor.pad_frame
+        self.frame_id = str(getattr(node, "frame_prefix", "")) + sensor.pad_frame
         self.pub_field = node.create_publisher(PointCloud2, "field", out_qos)
         self.pub_wrench = node.create_publisher(WrenchStamped, "wrench", out_qos)
         self.pub_contact = node.create_publisher(Contact, "contact", out_qos)
@@ -228,6 +230,8 @@ class TouchOutputs:
     def _on_tare(self, _request: Any, response: Any) -> Any:
         ok, text = self.stage.tare()
         response.success, response.message = ok, text
+        self.tares += int(ok)
+        self.last_tare = f"{'accepted' if ok else 'refused'}: {text}"
         log = self.node.get_logger()
         (log.info if ok else log.warning)(f"tare {text}")
         self.announced_waiting = False

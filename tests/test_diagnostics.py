@@ -1,0 +1,118 @@
+"""Diagnostics on /diagnostics (issue 12): OK on a good bag, calibration ERROR when swapped.
+
+Two replay + decoder pairs run at once, each in its own DDS domain: one plays the untouched
+bag as recorded, the other the same bag with the left and right CameraInfo swapped (the
+wrong calibration file on each camera).  The first must reach a DiagnosticArray in which
+every status of the decoder is OK; the second must report its calibration as ERROR naming
+the swap, while its inputs are fine.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+
+from ros_harness import next_domain_id, start_node, stop
+
+pytestmark = pytest.mark.ros
+
+rclpy = pytest.importorskip("rclpy")
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+BAG = REPO / "bags" / "no_contact.mcap"
+TASKS = {"input left", "input right", "processing", "coverage", "classifier",
+         "touch reference", "calibration"}
+
+
+def _swapped_info_bag(path: Path) -> Path:
+    from tactile_sl_camera.bag_io import BagReader, BagWriter
+
+    swap = {"/tactile/left/camera_info": "/tactile/right/camera_info",
+            "/tactile/right/camera_info": "/tactile/left/camera_info"}
+    with BagWriter(path) as out:
+        for raw in BagReader(BAG).raw_messages():
+            out.write_raw(swap.get(raw.topic, raw.topic), raw.schema_name, raw.data,
+                          raw.log_time_ns)
+    return path
+
+
+class Listener:
+    """Collects /diagnostics of one domain as {task: (level, message, values)}."""
+
+    def __init__(self, domain: int, name: str) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain)
+        self.node = rclpy.create_node(f"diagnostics_listener_{name}", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.arrays: list[dict[str, tuple[int, str, dict[str, str]]]] = []
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on, 10)
+
+    def _on(self, msg: DiagnosticArray) -> None:
+        got = {}
+        for s in msg.status:
+            node, task = s.name.split(": ", 1)
+            assert node == "tactile/decoder" and s.hardware_id
+            got[task] = (s.level[0] if isinstance(s.level, bytes) else int(s.level),
+                         s.message, {kv.key: kv.value for kv in s.values})
+        self.arrays.append(got)
+
+    def spin(self) -> None:
+        self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+def test_diagnostics_ok_on_a_good_bag_and_calibration_error_when_swapped(tmp_path):
+    bags = {"good": BAG, "swapped": _swapped_info_bag(tmp_path / "swapped.mcap")}
+    procs, listeners = [], {}
+    try:
+        for name, bag in bags.items():
+            domain = next_domain_id()
+            listeners[name] = Listener(domain, name)
+            ns = ["-r", "__ns:=/tactile"]
+            procs.append(start_node("tactile_sl_decoder", "decoder", domain,
+                                    [*ns, "-p", "diagnostic_period:=0.5"],
+                                    tmp_path / f"decoder_{name}.log"))
+            procs.append(start_node("tactile_sl_camera", "replay", domain,
+                                    [*ns, "-p", f"bag:={bag}", "-p", "loop:=true",
+                                     "-p", "rate:=0.5"], tmp_path / f"replay_{name}.log"))
+
+        def done(name: str) -> bool:
+            arrays = listeners[name].arrays
+            if name == "good":
+                return any(set(a) == TASKS and all(v[0] == 0 for v in a.values())
+                           for a in arrays)
+            return any(a.get("calibration", (0,))[0] == 2 and a["coverage"][0] != 0
+                       and a["input left"][0] == 0 for a in arrays)
+
+        deadline = time.monotonic() + 45
+        while time.monotonic() < deadline and not all(done(n) for n in listeners):
+            for listener in listeners.values():
+                listener.spin()
+        logs = {p.name: p.read_text() for p in tmp_path.glob("*.log")}
+        last = {n: (listeners[n].arrays[-1] if listeners[n].arrays else None)
+                for n in listeners}
+        assert done("good"), (last["good"], logs["decoder_good.log"][-2000:])
+        assert done("swapped"), (last["swapped"], logs["decoder_swapped.log"][-2000:])
+        ok = next(a for a in listeners["good"].arrays if all(v[0] == 0 for v in a.values()))
+        assert ok["calibration"][1].startswith("PASS")
+        assert float(ok["input left"][2]["rate_hz"]) > 0
+        assert float(ok["processing"][2]["latency_median_ms"]) > 0
+        assert float(ok["coverage"][2]["coverage"]) > 0.9
+        bad = next(a for a in listeners["swapped"].arrays if a.get("calibration", (0,))[0] == 2)
+        assert "swapped" in bad["calibration"][1]
+        assert "calibration health ERROR" in logs["decoder_swapped.log"]
+        assert "calibration health OK" in logs["decoder_good.log"]
+    finally:
+        for listener in listeners.values():
+            listener.close()
+        for p in procs:
+            stop(p)
