@@ -1,0 +1,55 @@
+"""The several-sensors list (config/sensors.yaml) that sensors.launch.py starts (no ROS)."""
+from __future__ import annotations
+
+import pathlib
+import py_compile
+
+import pytest
+
+from tactile_sl_decoder.nodes.sensors import SensorsFileError, load_sensors, parse_sensors
+
+PKG = pathlib.Path(__file__).resolve().parents[1]
+
+
+def test_shipped_list_gives_two_sensors_with_distinct_frames_and_stable_devices():
+    sensors = load_sensors(PKG / "config" / "sensors.yaml")
+    assert [s.namespace for s in sensors] == ["left_hand", "right_hand"]
+    assert [s.frame_prefix for s in sensors] == ["left_hand_", "right_hand_"]
+    for s in sensors:
+        assert s.camera["frame_prefix"] == s.decoder["frame_prefix"] == s.frame_prefix
+        assert s.camera["left_device"].startswith("/dev/v4l/by-id/")
+        assert s.camera["right_camera_info_url"].startswith("file://")
+    launch = PKG / "launch" / "sensors.launch.py"
+    py_compile.compile(str(launch), doraise=True)
+    assert "load_sensors" in launch.read_text()
+
+
+def _one(**entry):
+    base = {"namespace": "a", "left_device": "/dev/v4l/by-id/l", "right_device": "/dev/v4l/by-id/r"}
+    base.update(entry)
+    return base
+
+
+def test_overrides_and_side_by_side():
+    (s,) = parse_sensors({"sensors": [_one(frame_prefix="x_", mirrored=True,
+                                           camera={"fps": 15.0}, decoder={"min_votes": 3})]})
+    assert s.camera["fps"] == 15.0 and s.decoder == {"mirrored": True, "min_votes": 3,
+                                                     "frame_prefix": "x_"}
+    (s,) = parse_sensors({"sensors": [{"namespace": "b", "left_device": "/dev/v4l/by-id/sbs",
+                                       "side_by_side": True}]})
+    assert "right_device" not in s.camera
+
+
+@pytest.mark.parametrize("doc, words", [
+    ({}, "non-empty list"),
+    ({"sensors": [_one(namespace="1bad")]}, "not a ROS name"),
+    ({"sensors": [_one(), _one(left_device="/dev/v4l/by-id/x", right_device="/dev/y")]},
+     "namespace used by more than one"),
+    ({"sensors": [_one(), _one(namespace="b")]}, "device used twice"),
+    ({"sensors": [_one(right_device="")]}, "right_device is required"),
+    ({"sensors": [_one(frame_prefix="/x")]}, "leading '/'"),
+    ({"sensors": [_one(devices="x")]}, "unknown keys"),
+])
+def test_bad_lists_are_refused_with_the_reason(doc, words):
+    with pytest.raises(SensorsFileError, match=words):
+        parse_sensors(doc)
