@@ -26,6 +26,7 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     SetParametersResult,
 )
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 Apply = Callable[[Any], None]
 Check = Callable[[Any], "str | None"]
@@ -139,3 +140,39 @@ def frame_prefix_check(prefix: str) -> str | None:
     if prefix.startswith("/") or any(c.isspace() for c in prefix):
         return "a frame id prefix has no leading '/' and no spaces (REP 105 frame names)"
     return None
+
+
+RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
+DURABILITY = {"volatile": DurabilityPolicy.VOLATILE,
+              "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
+
+
+def _choice(options: dict[str, Any]) -> Check:
+    return lambda v: None if v in options else f"must be one of {', '.join(options)}"
+
+
+def declare_qos(live: LiveParameters, name: str, what: str, depth: int,
+                reliability: str = "reliable", durability: str = "volatile",
+                fixed: tuple[str, ...] = ()) -> QoSProfile:
+    """QoS of publishers or subscriptions from ``qos.<name>.reliability|depth|durability``.
+
+    Read-only parameters (QoS is fixed when the endpoint is created); the defaults are the
+    node's documented choice (README "QoS").  History is always KEEP_LAST ``depth``.  Names
+    in ``fixed`` ('reliability', 'depth') are not declared: the node already has a parameter
+    for them (e.g. the decoder's ``input_depth``) and passes its value.
+    """
+    rel, dep = reliability, int(depth)
+    if "reliability" not in fixed:
+        rel = str(live.declare(f"qos.{name}.reliability", reliability,
+                               f"QoS reliability of {what}: reliable or best_effort.",
+                               check=_choice(RELIABILITY), read_only=True))
+    if "depth" not in fixed:
+        dep = int(live.declare(f"qos.{name}.depth", int(depth),
+                               f"QoS history depth (keep last) of {what}.", (1, 10000),
+                               read_only=True))
+    dur = str(live.declare(f"qos.{name}.durability", durability,
+                           f"QoS durability of {what}: volatile or transient_local (late "
+                           "joiners get the last messages).", check=_choice(DURABILITY),
+                           read_only=True))
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=dep,
+                      reliability=RELIABILITY[rel], durability=DURABILITY[dur])

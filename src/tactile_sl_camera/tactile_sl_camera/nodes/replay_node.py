@@ -14,7 +14,6 @@ from typing import Any
 
 import rclpy
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.serialization import deserialize_message, serialize_message
 
 from tactile_sl_camera.bag_io import BagError, stamp_to_ns
@@ -22,6 +21,7 @@ from tactile_sl_camera.nodes import stop
 from tactile_sl_camera.nodes.parameters import (
     FRAME_PREFIX_DOC,
     LiveParameters,
+    declare_qos,
     frame_prefix_check,
 )
 from tactile_sl_camera.nodes.runner import run_node
@@ -114,11 +114,9 @@ class ReplayNode(Node):
             self.restamp = True
             self.get_logger().info("loop implies restamp: every pass is stamped with the time "
                                    "it is published, so stamps keep moving forward")
-        qos = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST, depth=depth,
-            reliability=(ReliabilityPolicy.RELIABLE if reliability == "reliable"
-                         else qos_profile_sensor_data.reliability),
-            durability=qos_profile_sensor_data.durability)
+        qos = declare_qos(live, "output", "the played topics (reliability and depth: the "
+                          "parameters of those names)", depth, reliability, fixed=("reliability",
+                                                                                  "depth"))
         self.publishers_by_topic = {
             name: self.create_publisher(message_class(self.plan.types[bag_topic]), name, qos)
             for bag_topic, name in self.plan.outputs.items()}
@@ -127,7 +125,9 @@ class ReplayNode(Node):
         self._ack = threading.Condition()
         self.pacing = bool(pace_topic)
         if self.pacing:
-            self.create_subscription(message_class(pace_type), pace_topic, self._on_pace, 10)
+            self.create_subscription(message_class(pace_type), pace_topic, self._on_pace,
+                                     declare_qos(live, "pace", "the wait_for_topic "
+                                                 "subscription", 10))
         self.done = threading.Event()
         self._done_at: float | None = None
         self._stopping = threading.Event()

@@ -13,7 +13,6 @@ from typing import Any
 
 import rclpy
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from tactile_sl_camera.nodes.runner import run_node
@@ -22,7 +21,7 @@ from ..sim.artwork import ArtworkError
 from ..sim.scenes import SceneError, load_scenes, parse_scene
 from ..sim.synth import FrameIds, RendererCache, frame_messages, render_scene_frame
 from .camera_common import camera_info_msg, cloud_msg, image_msg
-from .parameters import FRAME_PREFIX_DOC, LiveParameters, frame_prefix_check
+from .parameters import FRAME_PREFIX_DOC, LiveParameters, declare_qos, frame_prefix_check
 
 BUILTIN_SCENE = {
     "name": "sphere_press", "frames": 20, "fps": 10,
@@ -77,7 +76,8 @@ class SimCameraNode(Node):
             self.scene.encoding = encoding
         self.period = 1.0 / (rate if rate > 0 else self.scene.fps)
         self.renderer = RendererCache(artwork or None).get(self.scene)
-        qos = qos_profile_sensor_data
+        qos = declare_qos(live, "images", "the image and camera_info publishers", 5,
+                          "best_effort")
         self.pubs: dict[str, Any] = {
             "left/image_raw": self.create_publisher(Image, "left/image_raw", qos),
             "right/image_raw": self.create_publisher(Image, "right/image_raw", qos),
@@ -87,7 +87,7 @@ class SimCameraNode(Node):
         if self.publish_truth:
             self.pubs["ground_truth/points"] = self.create_publisher(
                 PointCloud2, "ground_truth/points",
-                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+                declare_qos(live, "ground_truth", "ground_truth/points", 10))
         self._frames: dict[int, list[tuple[str, str, dict[str, Any]]]] = {}
         self.published = 0
         self._stop = threading.Event()

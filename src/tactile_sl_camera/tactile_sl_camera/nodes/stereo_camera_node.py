@@ -14,7 +14,6 @@ import time
 import numpy as np
 import rclpy
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image
 
 from tactile_sl_camera.nodes.runner import run_node
@@ -28,7 +27,7 @@ from ..camera_info import (
 from ..images import image_fields
 from ..stereo_capture import CaptureConfig, StereoCapture
 from .camera_common import camera_info_msg, image_msg
-from .parameters import FRAME_PREFIX_DOC, LiveParameters, frame_prefix_check
+from .parameters import FRAME_PREFIX_DOC, LiveParameters, declare_qos, frame_prefix_check
 
 
 class StereoCameraNode(Node):
@@ -79,7 +78,8 @@ class StereoCameraNode(Node):
                              for url, side in zip(urls, ("left", "right"))]
         self.capture = StereoCapture(cfg, log=self._log)
         self.cfg = cfg
-        qos = qos_profile_sensor_data
+        qos = declare_qos(live, "images", "the image and camera_info publishers", 5,
+                          "best_effort")
         self.pub_images = [self.create_publisher(Image, f"{s}/image_raw", qos)
                            for s in ("left", "right")]
         self.pub_infos = [self.create_publisher(CameraInfo, f"{s}/camera_info", qos)

@@ -24,7 +24,6 @@ from typing import Any
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
 
 from tactile_sl_camera.clouds import cloud_fields
@@ -33,6 +32,7 @@ from tactile_sl_camera.nodes.parameters import (
     FRAME_PREFIX_DOC,
     LiveParameters,
     dataclass_fields,
+    declare_qos,
     field_docs,
     frame_prefix_check,
 )
@@ -163,12 +163,11 @@ class DecoderNode(Node):
                       "right": 0}
         self._proc_ms: list[float] = []
 
-        sensor = QoSProfile(history=HistoryPolicy.KEEP_LAST,
-                            depth=input_depth,
-                            reliability=qos_profile_sensor_data.reliability,
-                            durability=qos_profile_sensor_data.durability)
-        out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
-                             reliability=ReliabilityPolicy.RELIABLE)
+        sensor = declare_qos(self.params, "input", "the image (or symbols) and camera_info "
+                             "subscriptions (depth: input_depth)", input_depth, "best_effort",
+                             fixed=("depth",))
+        out_qos = declare_qos(self.params, "output", "points, left|right/symbols_decoded and "
+                              "the touch outputs field, wrench, contact, depth", 5)
         self.pub_points = self.create_publisher(PointCloud2, "points", out_qos)
         self.touch = TouchOutputs(self, pattern.array.shape, pattern.pitch_m,
                                   params.decode.mirrored, out_qos)
@@ -197,7 +196,8 @@ class DecoderNode(Node):
         self._tares_seen = 0
         self.diagnostics = DiagnosticsPublisher(
             self, self._diagnostic_statuses, diag_period,
-            self.frame_prefix.strip("_/") or self.get_namespace().strip("/") or self.get_name())
+            self.frame_prefix.strip("_/") or self.get_namespace().strip("/") or self.get_name(),
+            declare_qos(self.params, "diagnostics", "/diagnostics", 10))
         self.get_logger().info(
             f"decoder ready: input={self.input_mode}, pattern {pattern.array.shape[0]}x"
             f"{pattern.array.shape[1]} (window {pattern.window[0]}x{pattern.window[1]}, "

@@ -12,9 +12,8 @@ from __future__ import annotations
 import time
 
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 
-from tactile_sl_camera.nodes.parameters import LiveParameters
+from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.classifier import PATCH, Classifier
 from tactile_sl_decoder.symbol_array import SymbolArrayError, fill_message, from_message
@@ -46,9 +45,10 @@ class SymbolClassifierNode(Node):
         self.classifier = Classifier.load(weights)
         self.stored_threshold = float(self.classifier.threshold)
         self._set_threshold(threshold)
-        self.pub = self.create_publisher(SymbolArray, "labelled_symbols", QoSProfile(depth=10))
-        self.sub = self.create_subscription(SymbolArray, "symbols", self.on_symbols,
-                                            QoSProfile(depth=10))
+        self.pub = self.create_publisher(SymbolArray, "labelled_symbols", declare_qos(
+            live, "output", "the labelled_symbols publisher", 10))
+        self.sub = self.create_subscription(SymbolArray, "symbols", self.on_symbols, declare_qos(
+            live, "input", "the symbols subscription", 10))
         self.get_logger().info(f"classifier {self.classifier.meta.get('arch')} with "
                                f"{self.classifier.classes} classes, threshold "
                                f"{self.classifier.threshold:.2f}")

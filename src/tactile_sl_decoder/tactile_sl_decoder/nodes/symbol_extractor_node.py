@@ -15,11 +15,10 @@ import time
 
 import cv2
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
 from tactile_sl_camera.images import ImageFormatError, to_gray
-from tactile_sl_camera.nodes.parameters import LiveParameters
+from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.extraction import extract_symbols
 from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
@@ -41,9 +40,10 @@ class SymbolExtractorNode(Node):
             "threads", 1, "OpenCV threads (1: one image uses one core; run one node per "
             "camera).", (1, 256), read_only=True))
         cv2.setNumThreads(threads)
-        self.pub = self.create_publisher(SymbolArray, "symbols", QoSProfile(depth=10))
-        self.sub = self.create_subscription(Image, "image", self.on_image,
-                                            qos_profile_sensor_data)
+        self.pub = self.create_publisher(SymbolArray, "symbols", declare_qos(
+            self.live, "output", "the symbols publisher", 10))
+        self.sub = self.create_subscription(Image, "image", self.on_image, declare_qos(
+            self.live, "input", "the image subscription", 5, "best_effort"))
         self.count = 0
         self.busy = 0.0
 

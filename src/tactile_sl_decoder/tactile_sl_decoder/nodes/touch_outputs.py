@@ -21,6 +21,7 @@ from sensor_msgs.msg import Image, PointCloud2
 from std_srvs.srv import Trigger
 
 from tactile_sl_camera.nodes.camera_common import cloud_msg
+from tactile_sl_camera.nodes.parameters import declare_qos
 from tactile_sl_decoder.touch.messages import (
     contact_fields,
     depth_fields,
@@ -199,6 +200,9 @@ class TouchOutputs:
         latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                              reliability=ReliabilityPolicy.RELIABLE,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        if getattr(node, "params", None) is not None:
+            latched = declare_qos(node.params, "pad_pose", "pad_pose (latched: late joiners "
+                                  "get the pad frame)", 1, "reliable", "transient_local")
         self.pub_pose = node.create_publisher(PoseStamped, "pad_pose", latched)
         self.tf = StaticTransformBroadcaster(node) if StaticTransformBroadcaster else None
         node.create_service(Trigger, "tare", self._on_tare)
