@@ -3,12 +3,15 @@
 ros2 launch tactile_sl_decoder tactile_sl.launch.py bag:=bags/press.mcap
 ros2 launch tactile_sl_decoder tactile_sl.launch.py bag:=bags/press.mcap stages:=true
 ros2 launch tactile_sl_decoder tactile_sl.launch.py source:=camera
+ros2 launch tactile_sl_decoder tactile_sl.launch.py bag:=bags/press.mcap loop:=true rviz:=true
 
 source:=replay (default) plays `bag` with tactile_sl_camera's replay node; source:=camera
 starts tactile_sl_camera's stereo_camera node instead.  stages:=false (default) runs
 extraction and classification inside the decoder (lowest latency); stages:=true chains the
 symbol_extractor / symbol_classifier nodes per camera and the decoder consumes their
-labelled SymbolArrays, giving the same points.
+labelled SymbolArrays, giving the same points.  rviz:=true opens RViz with
+share/tactile_sl_decoder/rviz/tactile_sl.rviz (points, field, wrench, pad_pose, depth; its
+topics are under /tactile).
 """
 import os
 
@@ -30,6 +33,7 @@ def generate_launch_description() -> LaunchDescription:
     decoder_yaml = os.path.join(decoder_share, "config", "decoder.yaml")
     replay_yaml = os.path.join(camera_share, "config", "replay.yaml")
     camera_yaml = os.path.join(camera_share, "config", "stereo_camera.yaml")
+    rviz_config = os.path.join(decoder_share, "rviz", "tactile_sl.rviz")
     return LaunchDescription([
         DeclareLaunchArgument("namespace", default_value="/tactile",
                               description="namespace of every node and topic"),
@@ -46,6 +50,12 @@ def generate_launch_description() -> LaunchDescription:
                               "extraction/classification stage nodes"),
         DeclareLaunchArgument("mirrored", default_value="false",
                               description="the cameras see the artwork mirrored"),
+        DeclareLaunchArgument("rviz", default_value="false",
+                              description="true: open RViz with rviz/tactile_sl.rviz (cloud, "
+                              "touch field, wrench, pad pose, depth image)"),
+        Node(package="rviz2", executable="rviz2", name="rviz2",
+             arguments=["-d", rviz_config], condition=IfCondition(LaunchConfiguration("rviz")),
+             output="screen"),
         Node(
             package="tactile_sl_camera", executable="replay", name="replay", namespace=ns,
             parameters=[replay_yaml, {"bag": LaunchConfiguration("bag"),
