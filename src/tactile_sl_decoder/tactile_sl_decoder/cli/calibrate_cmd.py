@@ -20,6 +20,8 @@ import pathlib
 import sys
 from typing import Any, Callable
 
+from tactile_sl_decoder.cli.argtypes import number
+
 PROG = "tactile-sl calibrate"
 
 
@@ -100,7 +102,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     f.add_argument("--fit-thickness", action="store_true",
                    help="also choose the layer thickness (0 = half-space ... 8 mm) that best "
                    "explains the displacement fields")
-    f.add_argument("--reference-frames", type=int, default=1, metavar="N",
+    f.add_argument("--reference-frames", type=number(int, 1, 1000), default=1, metavar="N",
                    help="the first N decoded frames are the untouched reference (default 1)")
     p.add_argument("--left-topic", default="/tactile/left/image_raw")
     p.add_argument("--right-topic", default="/tactile/right/image_raw")
@@ -379,8 +381,6 @@ def _run_force(args: argparse.Namespace) -> int:
 
     if not args.bag:
         raise ValueError("--loads needs the recording: --bag BAG")
-    if not 1 <= args.reference_frames <= 1000:
-        raise ValueError(f"--reference-frames must be in 1..1000, got {args.reference_frames}")
     loads = load_loads_file(args.loads)
     start = load_sensor(args.sensor)
     pattern = PatternSpec.load(args.target or None)

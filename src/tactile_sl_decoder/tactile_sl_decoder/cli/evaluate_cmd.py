@@ -13,6 +13,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from tactile_sl_decoder.cli.argtypes import number
+
 
 def register(subparsers: Any) -> None:
     """Add the ``evaluate`` subcommand."""
@@ -31,7 +33,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--weights", type=Path, default=None,
                    help="classifier weights (default: shipped)")
     p.add_argument("--namespace", default="/tactile", help="topic namespace in the bags")
-    p.add_argument("--max-frames", type=_non_negative_int, default=0,
+    p.add_argument("--max-frames", type=number(int, 0, 10**9), default=0,
                    help="frames per bag (0 = all)")
     p.add_argument("--totals-only", action="store_true",
                    help="print one row per scene instead of one per image")
@@ -39,30 +41,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--sensor", type=Path, default=None, metavar="SENSOR.yaml",
                    help="sensor file for the touch figures (default: the elastomer of the "
                    "bag's scene in a *scenes.yaml beside it, else the shipped sensor file)")
-    p.add_argument("--reference-frames", type=_reference_frames, default=1, metavar="N",
+    p.add_argument("--reference-frames", type=number(int, 1, 1000), default=1, metavar="N",
                    help="touch figures: the first N decoded frames are the untouched "
                    "reference, as in `tactile-sl replay` (default 1)")
     p.set_defaults(func=run)
-
-
-def _non_negative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
-
-
-def _reference_frames(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if not 1 <= value <= 1000:
-        raise argparse.ArgumentTypeError(f"must be in 1..1000, got {value}")
-    return value
 
 
 def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from tactile_sl_camera.safe_files import OutputError, check_output, write_text
+from tactile_sl_decoder.cli.argtypes import number
 
 from ..pattern import (
     Constraints,
@@ -28,19 +29,6 @@ EXIT_USAGE = 2
 
 # Largest PNG `pattern render` draws (output pixels; rendering supersamples each one).
 MAX_RENDER_PIXELS = 60_000_000
-
-
-def _number(kind: type, low: float, high: float, what: str) -> Any:
-    """Build an argparse type: a ``kind`` number in [low, high]."""
-    def parse(text: str) -> Any:
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a {kind.__name__}") from None
-        if not (low <= value <= high) or (kind is float and not math.isfinite(value)):
-            raise argparse.ArgumentTypeError(f"{what} must be in [{low}, {high}], got {text}")
-        return value
-    return parse
 
 
 def _shape(text: str) -> tuple[int, int]:
@@ -263,16 +251,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                      help="array rows x cols")
     gen.add_argument("--algorithm", choices=names, default=names[0], metavar="NAME",
                      help=f"generator (default {names[0]}): {algo_help}")
-    gen.add_argument("--seed", type=_number(int, 0, 2**32 - 1, "--seed"), default=0,
+    gen.add_argument("--seed", type=number(int, 0, 2**32 - 1), default=0,
                      help="random seed (default 0)")
-    gen.add_argument("--time-limit", type=_number(float, 0.001, 1e6, "--time-limit"),
+    gen.add_argument("--time-limit", type=number(float, 0.001, 1e6),
                      default=60.0, metavar="SECONDS",
                      help="time budget (default 60)")
     gen.add_argument("--tidy", action="store_true",
                      help="auto/linear only: among offsets of the fold found, keep the one with "
                           "the fewest constant or repeated lines and draw a constant line with "
                           "value 1 (circles); still verified")
-    gen.add_argument("--pitch-m", type=_number(float, 1e-6, 0.1, "--pitch-m"),
+    gen.add_argument("--pitch-m", type=number(float, 1e-6, 0.1),
                      default=DEFAULT_PITCH_M,
                      help=f"symbol pitch in metres written to the file (default {DEFAULT_PITCH_M})")
     gen.add_argument("-o", "--output", required=True, metavar="FILE.yaml")
@@ -290,11 +278,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ren.add_argument("file", metavar="FILE.yaml")
     ren.add_argument("--svg", metavar="OUT.svg")
     ren.add_argument("--png", metavar="OUT.png")
-    ren.add_argument("--dpi", type=_number(float, 1.0, 1e6, "--dpi"), metavar="D",
+    ren.add_argument("--dpi", type=number(float, 1.0, 1e6), metavar="D",
                      help="PNG resolution (dots per inch)")
-    ren.add_argument("--pitch-px", type=_number(float, 1.0, 1e5, "--pitch-px"), metavar="P",
+    ren.add_argument("--pitch-px", type=number(float, 1.0, 1e5), metavar="P",
                      help="PNG resolution as pixels per pitch instead of --dpi")
-    ren.add_argument("--margin", type=_number(float, 0.0, 100.0, "--margin"), default=1.5,
+    ren.add_argument("--margin", type=number(float, 0.0, 100.0), default=1.5,
                      metavar="PITCHES",
                      help="margin around the outer cell centres, in pitches (default 1.5)")
     ren.add_argument("--allow-invalid-pattern", action="store_true",
@@ -306,9 +294,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     bnd.set_defaults(func=cmd_bound)
 
     ben = sub.add_parser("benchmark", help="rerun Table I: every generator on every row")
-    ben.add_argument("--seeds", type=_number(int, 1, 1000, "--seeds"), default=3,
+    ben.add_argument("--seeds", type=number(int, 1, 1000), default=3,
                      help="seeds per cell (default 3)")
-    ben.add_argument("--time-limit", type=_number(float, 0.001, 1e6, "--time-limit"),
+    ben.add_argument("--time-limit", type=number(float, 0.001, 1e6),
                      default=10.0, metavar="SECONDS",
                      help="budget per run (default 10)")
     ben.add_argument("--algorithms", nargs="+", choices=names[1:], default=None,

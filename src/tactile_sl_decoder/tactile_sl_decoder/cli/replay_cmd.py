@@ -14,6 +14,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from tactile_sl_decoder.cli.argtypes import number
+
 
 def register(subparsers: Any) -> None:
     """Add the ``replay`` subcommand."""
@@ -37,23 +39,13 @@ def register(subparsers: Any) -> None:
                    help="the cameras see the artwork mirrored (sensor setting)")
     p.add_argument("--sensor", metavar="SENSOR.yaml", default=None,
                    help="sensor file: elastomer and pad frame (default: the shipped one)")
-    p.add_argument("--reference-frames", type=_positive_int, default=1, metavar="N",
+    p.add_argument("--reference-frames", type=number(int, 1, 1000), default=1, metavar="N",
                    help="the first N decoded frames are the untouched reference (default 1)")
     p.add_argument("--no-touch", action="store_true",
                    help="write only /tactile/points (no field, wrench, contact, depth)")
     p.add_argument("--namespace", default="/tactile", help="topic namespace of the bag")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if not 1 <= value <= 1000:
-        raise argparse.ArgumentTypeError(f"must be in 1..1000, got {value}")
-    return value
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,19 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from tactile_sl_decoder.classifier import DEFAULT_THRESHOLD, default_weights_path
-
-
-def _number(kind: type, low: float, high: float) -> Any:
-    """Build an argparse type: a ``kind`` number in [low, high]."""
-    def parse(text: str) -> Any:
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not a {kind.__name__}") from None
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"must be in [{low}, {high}], got {text}")
-        return value
-    return parse
+from tactile_sl_decoder.cli.argtypes import number
 
 
 def register(subparsers: Any) -> None:
@@ -31,19 +19,19 @@ def register(subparsers: Any) -> None:
         "extract glyphs, label them from the ground truth and train the LeNet classifier. "
         "Held-out frames use other seeds and other indenter kinds. Writes the weights "
         "(default: the ones the package ships) and a model card next to them.")
-    p.add_argument("--frames", type=_number(int, 1, 100_000), default=80,
+    p.add_argument("--frames", type=number(int, 1, 100_000), default=80,
                    help="training stereo frames (default 80)")
-    p.add_argument("--val-frames", type=_number(int, 1, 100_000), default=16,
+    p.add_argument("--val-frames", type=number(int, 1, 100_000), default=16,
                    help="held-out stereo frames (default 16)")
-    p.add_argument("--epochs", type=_number(int, 1, 10_000), default=12,
+    p.add_argument("--epochs", type=number(int, 1, 10_000), default=12,
                    help="passes over the data (default 12)")
-    p.add_argument("--seed", type=_number(int, 0, 2**31 - 1), default=1,
+    p.add_argument("--seed", type=number(int, 0, 2**31 - 1), default=1,
                    help="seed of data and training (default 1)")
-    p.add_argument("--threshold", type=_number(float, 0.0, 1.0), default=DEFAULT_THRESHOLD,
+    p.add_argument("--threshold", type=number(float, 0.0, 1.0), default=DEFAULT_THRESHOLD,
                    help=f"confidence threshold stored with the weights ({DEFAULT_THRESHOLD})")
     p.add_argument("--artwork", default=None,
                    help="artwork PNG the simulator renders (default: the installed one)")
-    p.add_argument("--threads", type=_number(int, 1, 1024), default=1,
+    p.add_argument("--threads", type=number(int, 1, 1024), default=1,
                    help="torch CPU threads (default 1)")
     p.add_argument("-o", "--output", type=Path, default=None,
                    help=f"weights file (default {default_weights_path()})")
