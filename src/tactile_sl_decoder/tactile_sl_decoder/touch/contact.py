@@ -58,6 +58,12 @@ class ContactState:
     region_centroid: list[tuple[float, float, float]] = field(default_factory=list)
 
 
+_DR, _DC = (a.ravel() for a in np.mgrid[-1:2, -1:2])
+# Least-squares operator of z = a + b x + c y + d x^2 + e y^2 + g x y on the full 3x3 stencil.
+_STENCIL = np.linalg.pinv(np.column_stack([np.ones(9), _DC, _DR, _DC ** 2, _DR ** 2,
+                                           _DC * _DR]).astype(float))
+
+
 def max_indentation(indent: np.ndarray) -> float:
     """Largest indentation of a (rows, cols) grid (NaN = not decoded), between cells too.
 
@@ -66,25 +72,29 @@ def max_indentation(indent: np.ndarray) -> float:
     the peak when it is a maximum within one cell (a spherical tip's surface is exactly such
     a paraboloid inside the contact).  Never less than the deepest decoded cell, never < 0.
     """
-    if not np.isfinite(indent).any():
+    flat = np.nan_to_num(indent, nan=-np.inf)
+    i = int(np.argmax(flat))
+    best = float(flat.flat[i])
+    if not np.isfinite(best):
         return 0.0
-    filled = np.where(np.isfinite(indent), indent, -np.inf)
-    r0, c0 = np.unravel_index(int(np.argmax(filled)), indent.shape)
-    best = float(indent[r0, c0])
-    rr, cc = np.mgrid[-1:2, -1:2]
-    r = r0 + rr.ravel()
-    c = c0 + cc.ravel()
-    ok = (r >= 0) & (r < indent.shape[0]) & (c >= 0) & (c < indent.shape[1])
-    r, c = r[ok], c[ok]
-    z = indent[r, c]
-    good = np.isfinite(z)
-    if good.sum() >= 7:
-        x, y, z = (c - c0)[good].astype(float), (r - r0)[good].astype(float), z[good]
-        a = np.column_stack([np.ones_like(x), x, y, x * x, y * y, x * y])
-        coef = np.linalg.lstsq(a, z, rcond=None)[0]
-        hess = np.array([[2 * coef[3], coef[5]], [coef[5], 2 * coef[4]]])
-        if np.all(np.linalg.eigvalsh(hess) < 0):
-            xs, ys = np.linalg.solve(hess, -coef[1:3])
+    r0, c0 = divmod(i, indent.shape[1])
+    r, c = r0 + _DR, c0 + _DC
+    if r0 >= 1 and c0 >= 1 and r0 + 1 < indent.shape[0] and c0 + 1 < indent.shape[1]:
+        z = indent[r, c]
+        good = np.isfinite(z)
+        if good.all():
+            coef = _STENCIL @ z
+        elif good.sum() >= 7:
+            a = np.column_stack([np.ones(9), _DC, _DR, _DC ** 2, _DR ** 2, _DC * _DR])
+            coef = np.linalg.lstsq(a[good].astype(float), z[good], rcond=None)[0]
+        else:
+            return max(best, 0.0)
+        # a maximum: negative-definite Hessian [[2d, g], [g, 2e]]
+        d2, e2, g = 2 * coef[3], 2 * coef[4], coef[5]
+        det = d2 * e2 - g * g
+        if d2 < 0 and det > 0:
+            xs = (-coef[1] * e2 + coef[2] * g) / det
+            ys = (-coef[2] * d2 + coef[1] * g) / det
             if abs(xs) <= 1.0 and abs(ys) <= 1.0:
                 peak = float(coef[0] + coef[1] * xs + coef[2] * ys + coef[3] * xs * xs
                              + coef[4] * ys * ys + coef[5] * xs * ys)
@@ -199,13 +209,12 @@ class DepthMapper:
     def __call__(self, indent: np.ndarray) -> np.ndarray:
         grid = indent[:, ::-1] if self.mirrored else indent
         valid = np.isfinite(grid)
-        values = np.where(valid, grid, 0.0).astype(np.float32)
-        out = cv2.remap(values, self._map_x, self._map_y, cv2.INTER_LINEAR,
+        both = np.dstack([np.where(valid, grid, 0.0), valid]).astype(np.float32)
+        out = cv2.remap(both, self._map_x, self._map_y, cv2.INTER_LINEAR,
                         borderMode=cv2.BORDER_REPLICATE)
-        cover = cv2.remap(valid.astype(np.float32), self._map_x, self._map_y, cv2.INTER_LINEAR,
-                          borderMode=cv2.BORDER_REPLICATE)
-        out[cover < 1.0 - 1e-6] = np.nan
-        return out
+        depth = out[..., 0].copy()
+        depth[out[..., 1] < 1.0 - 1e-6] = np.nan
+        return depth
 
 
 def depth_map(indent: np.ndarray, upsample: int, mirrored: bool = False) -> np.ndarray:

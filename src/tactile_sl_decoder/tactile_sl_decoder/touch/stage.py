@@ -102,6 +102,10 @@ class TouchStage:
         self._last: TouchResult | None = None
         self.last_solve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._index = np.full(self.shape[0] * self.shape[1], -1, np.int64)
+        all_rows, all_cols = np.divmod(np.arange(self.shape[0] * self.shape[1]), self.shape[1])
+        # rest position of every cell: the reference's where it has one, else the nominal
+        self._rest_table = nominal_positions(all_rows, all_cols, self.shape, self.pitch,
+                                             self.mirrored)
 
     # ------------------------------------------------------------------ reference
 
@@ -136,6 +140,10 @@ class TouchStage:
                                      self.params.traction, self.mirrored)
         self._index[:] = -1
         self._index[cells] = np.arange(len(cells))
+        self._rest_table = nominal_positions(*np.divmod(np.arange(len(self._index)),
+                                                        self.shape[1]),
+                                             self.shape, self.pitch, self.mirrored)
+        self._rest_table[cells] = rest
         self.reference = Reference(cells, rest, pose, self._builder.collected, nominal)
 
     # ------------------------------------------------------------------ frames
@@ -159,9 +167,7 @@ class TouchStage:
         k = self._index[flat]
         known = k >= 0
         # A cell missing from the reference is measured against its nominal rest position.
-        rest = nominal_positions(rows, cols, self.shape, self.pitch, self.mirrored)
-        rest[known] = ref.rest[k[known]]
-        displacement = position - rest
+        displacement = position - self._rest_table[flat]
         n = len(ref.cells)
         disp_ref = np.zeros((n, 3))
         valid = np.zeros(n, bool)
@@ -171,7 +177,7 @@ class TouchStage:
         forces_ref, wrench = self.solver.solve(disp_ref, valid)
         self.last_solve = (disp_ref, valid, forces_ref)    # per reference cell (calibration)
         t2 = time.perf_counter()
-        ref_rows, ref_cols = ref.cells // self.shape[1], ref.cells % self.shape[1]
+        ref_rows, ref_cols = self.solver.rows, self.solver.cols
         wrench_force, wrench_moment = wrench[:3], wrench[3:]
         indent = np.full(self.shape, np.nan)
         indent[rows, cols] = -displacement[:, 2]

@@ -98,8 +98,11 @@ class TractionSolver:
                              float(np.linalg.norm(self._wrench_rows[4])))
         self._g32 = g.astype(np.float32)      # forward model: fit residuals (calibration)
         fm = scipy.linalg.cho_factor(h + self.params.map_weight * eye, check_finite=False)
-        self._map = np.ascontiguousarray(
-            scipy.linalg.cho_solve(fm, g.T, check_finite=False), dtype=np.float32)
+        full = scipy.linalg.cho_solve(fm, g.T, check_finite=False)
+        # One contiguous matrix per force component: the normal one finds the support, the
+        # tangential ones are then needed only on its rows (the map is memory-bound).
+        self._map_rows = [np.ascontiguousarray(full[axis::3], dtype=np.float32)
+                          for axis in range(3)]
         self._grid_index = np.full(self.shape, -1, np.int64)
         self._grid_index[self.rows, self.cols] = np.arange(n)
         self.last_support = np.zeros(n, bool)
@@ -141,30 +144,27 @@ class TractionSolver:
         disp = self._fill_missing(np.asarray(disp, np.float64), np.asarray(valid, bool))
         u = disp.reshape(-1)
         wrench = self._wrench_rows @ u
-        f = (self._map @ u.astype(np.float32)).astype(np.float64).reshape(-1, 3)
-        press = -f[:, 2]
-        peak = float(press.max()) if len(press) else 0.0
+        u32 = u.astype(np.float32)
+        press = -(self._map_rows[2] @ u32).astype(np.float64)
+        n = len(self.cells)
+        forces = np.zeros((n, 3))
+        self.last_support = np.zeros(n, bool)
+        peak = float(press.max()) if n else 0.0
         threshold = max(self.params.support_floor, self.params.support_fraction * peak)
         core = press > threshold
-        n = len(self.cells)
-        self.last_support = np.zeros(n, bool)
-        forces = np.zeros((n, 3))
-        if not core.any():
+        if wrench[2] >= 0.0 or not core.any():   # nothing presses overall: no contact map
             return forces, wrench
         grid = np.zeros(self.shape, np.uint8)
         grid[self.rows[core], self.cols[core]] = 1
         grid = cv2.dilate(grid, np.ones((3, 3), np.uint8))
-        keep = grid[self.rows, self.cols].astype(bool) & (press > 0.0)
-        self.last_support = keep
-        forces[keep] = f[keep]
-        total = -forces[:, 2].sum()
-        if wrench[2] >= 0.0 or total <= 0.0:     # nothing presses overall: no contact map
-            self.last_support[:] = False
-            return np.zeros((n, 3)), wrench
-        forces[keep, 2] *= -wrench[2] / total
+        keep = np.flatnonzero(grid[self.rows, self.cols].astype(bool) & (press > 0.0))
+        self.last_support[keep] = True
+        forces[keep, 2] = -press[keep] * (-wrench[2] / press[keep].sum())
         weight = forces[keep, 2] / forces[keep, 2].sum()
+        band = slice(int(keep[0]), int(keep[-1]) + 1)   # cells are row-major: a view, no copy
         for axis in (0, 1):
-            forces[keep, axis] += (wrench[axis] - forces[keep, axis].sum()) * weight
+            shear = (self._map_rows[axis][band] @ u32).astype(np.float64)[keep - band.start]
+            forces[keep, axis] = shear + (wrench[axis] - shear.sum()) * weight
         return forces, wrench
 
     def map_residual(self, disp: np.ndarray, valid: np.ndarray, forces: np.ndarray) -> float:
