@@ -79,3 +79,18 @@ def test_bad_settings_are_refused():
         TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=0))
     with pytest.raises(ValueError, match="pitch"):
         TouchStage(sensor, SHAPE, 0.0)
+
+
+@pytest.mark.parametrize("thickness", [0.0, 0.002])
+def test_contact_area_of_a_hertz_load(thickness):
+    """The area threshold calibrated per elastomer recovers a Hertz contact's area."""
+    sensor = SensorConfig(Elastomer(3e5, 0.49, thickness))
+    stage = TouchStage(sensor, SHAPE, PITCH)
+    rng = np.random.default_rng(4)
+    stage.update(_points(_displacement(sensor.elastomer, [], 0.5e-6, rng)))
+    assert stage.solver.area_fraction in (0.1, 0.15, 0.2, 0.25, 0.3, 0.35)
+    radius = 2.5e-3
+    disp = _displacement(sensor.elastomer, [(0.0, 0.0, -1.0, radius, 2.5e-4, 0.0)], 0.5e-6, rng)
+    out = stage.update(_points(disp))
+    assert abs(out.contact.area / (np.pi * radius ** 2) - 1) < 0.15
+    assert len(out.contact.region_force) == 1

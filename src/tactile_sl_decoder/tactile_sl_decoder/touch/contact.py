@@ -19,7 +19,8 @@ class ContactParams:
 
     force_on: float = 0.010    # N: in_contact turns on above this normal force ...
     force_off: float = 0.005   # N: ... and off below this one (hysteresis)
-    area_fraction: float = 0.2   # a cell counts into the area above this x its region's peak
+    area_fraction: float = 0.0   # a cell counts into the area above this x its region's
+                                 # peak; 0 = the traction solver's choice for the elastomer
     core_fraction: float = 0.3   # a region's centroid from its cells above this x its peak
     displacement_noise: float = 3e-6   # m per axis: weighs the two centroid estimates
     map_centroid_sigma: float = 6e-5   # m: uncertainty of the map's centroid (pitch / 8)
@@ -34,8 +35,8 @@ class ContactParams:
             raise ValueError(f"core_fraction must be in [0, 1), got {self.core_fraction}")
         if self.displacement_noise <= 0 or self.map_centroid_sigma <= 0:
             raise ValueError("displacement_noise and map_centroid_sigma must be > 0")
-        if not 0 < self.area_fraction < 1:
-            raise ValueError(f"area_fraction must be in (0, 1), got {self.area_fraction}")
+        if not 0 <= self.area_fraction < 1:
+            raise ValueError(f"area_fraction must be in [0, 1), got {self.area_fraction}")
         if not 1 <= self.depth_upsample <= 16:
             raise ValueError(f"depth_upsample must be in 1..16, got {self.depth_upsample}")
         return self
@@ -109,11 +110,12 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     """Contact state from per-cell forces (N) at rest positions (m) and the resultant.
 
     Normal and shear force come from the resultant.  The area and the regions come from
-    the per-cell map: a region is a set of 8-connected pressing cells; a cell counts into
-    the area when it presses by more than ``area_fraction`` of its region's peak (the map
-    is smooth over about a cell, so its low skirt lies outside the contact; 0.2 matches
-    Hertz and uniform contacts of radius 2.5-4.5 mm on the simulated scenes within about
-    20 %, docs/touch.md).
+    the per-cell map: a cell counts into the area when it presses by more than
+    ``area_fraction`` of the map's peak, and a region is a set of 8-connected pressing cells
+    with at least one such cell (smaller ripples of the map are not contacts; the map
+    is smooth over about a cell, so its low skirt lies outside the contact; the stage
+    passes the fraction its traction solver calibrated for the elastomer, see
+    :meth:`~tactile_sl_decoder.touch.traction.TractionSolver._area_fraction`).
 
     The centroid has two estimates: the resultant's, (M_y, -M_x) / P (exact for tractions
     at z = 0 since M = sum r x f, but its noise grows with the lever arms of the whole
@@ -140,13 +142,16 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     count, labels = cv2.connectedComponents(grid, connectivity=8)
     region = labels[rows, cols]
     regions = []
+    level = params.area_fraction * float(press.max())
     for k in range(1, count):
         sel = pressing & (region == k)
         w = press[sel]
+        inside = int((w > level).sum())
+        if inside == 0:          # a ripple of the map, not a contact
+            continue
         f = float(w.sum())
         core = np.where(w > params.core_fraction * w.max(), w, 0.0)
         c = (core[:, None] * rest_xy[sel]).sum(axis=0) / core.sum()
-        inside = int((w > params.area_fraction * w.max()).sum())
         regions.append((f, inside * cell_area, (float(c[0]), float(c[1]), 0.0), inside))
     regions.sort(key=lambda t: -t[0])
     state.region_force = [r[0] for r in regions]

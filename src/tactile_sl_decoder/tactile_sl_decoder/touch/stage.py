@@ -9,6 +9,7 @@ visibly touched.  Until a reference exists :meth:`TouchStage.update` returns Non
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -97,6 +98,7 @@ class TouchStage:
         self._depth = DepthMapper(self.shape, self.params.contact.depth_upsample, self.mirrored)
         self.reference: Reference | None = None
         self.solver: TractionSolver | None = None
+        self.contact_params = self.params.contact
         self._builder = ReferenceBuilder(self.params.reference_frames, self.shape)
         self._in_contact = False
         self._last: TouchResult | None = None
@@ -138,6 +140,8 @@ class TouchStage:
         rest = pose.to_pad(mean)
         self.solver = TractionSolver(self.sensor.elastomer, self.pitch, self.shape, cells,
                                      self.params.traction, self.mirrored)
+        fraction = self.params.contact.area_fraction or self.solver.area_fraction
+        self.contact_params = dataclasses.replace(self.params.contact, area_fraction=fraction)
         self._index[:] = -1
         self._index[cells] = np.arange(len(cells))
         self._rest_table = nominal_positions(*np.divmod(np.arange(len(self._index)),
@@ -183,7 +187,7 @@ class TouchStage:
         indent[rows, cols] = -displacement[:, 2]
         contact = contact_state(ref.nominal[:, :2], ref_rows, ref_cols, forces_ref, wrench,
                                 self.shape, self.pitch, indent, self._in_contact,
-                                self.params.contact, self.solver.moment_noise)
+                                self.contact_params, self.solver.moment_noise)
         self._in_contact = contact.in_contact
         depth = self._depth(indent)
         force = np.zeros((len(rows), 3))
