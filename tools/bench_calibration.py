@@ -36,7 +36,7 @@ from tactile_sl_decoder.calibrate.simulate import (
     render_pattern_views,
     true_cells_left,
 )
-from tactile_sl_decoder.stereo import StereoRig
+from tactile_sl_decoder.stereo.stereo import StereoRig
 
 
 def _errors(left: CameraCalibration, right: CameraCalibration, baseline: float,

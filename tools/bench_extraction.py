@@ -4,7 +4,7 @@
 Usage: python tools/bench_extraction.py [--repeat 200] [--bag bags/sphere_deep_small.mcap]
                                        [--stages]
 
-Images: synthetic glyph grids (~1,000-1,150 glyphs, tactile_sl_decoder.synth_glyphs) and,
+Images: synthetic glyph grids (~1,000-1,150 glyphs, tactile_sl_decoder.tooling.synth_glyphs) and,
 if given, the left images of a bag. Threads of OpenBLAS/OpenMP/torch/OpenCV are limited to
 one and the process is pinned to one CPU. Prints the median and 90th percentile of the wall
 time and of the thread CPU time (the latter is what a core actually spent; on a shared, busy
@@ -26,10 +26,10 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from tactile_sl_decoder import extraction as ex  # noqa: E402
-from tactile_sl_decoder.classifier import Classifier  # noqa: E402
-from tactile_sl_decoder.extraction import extract_symbols  # noqa: E402
-from tactile_sl_decoder.synth_glyphs import synth_image  # noqa: E402
+from tactile_sl_decoder.classify.classifier import Classifier  # noqa: E402
+from tactile_sl_decoder.extract import extraction as ex  # noqa: E402
+from tactile_sl_decoder.extract.extraction import extract_symbols  # noqa: E402
+from tactile_sl_decoder.tooling.synth_glyphs import synth_image  # noqa: E402
 
 
 def timed(fn, repeat: int) -> tuple[np.ndarray, np.ndarray]:

@@ -124,7 +124,7 @@ class Floor:
     def __init__(self, pipe, parallel: bool) -> None:
         from concurrent.futures import ThreadPoolExecutor
 
-        from tactile_sl_decoder.extraction import ExtractionParams
+        from tactile_sl_decoder.extract.extraction import ExtractionParams
 
         self.pipe = pipe
         self.params = ExtractionParams(open_size=0)
@@ -133,7 +133,7 @@ class Floor:
     def _regions(self, gray: np.ndarray) -> int:
         import cv2
 
-        from tactile_sl_decoder.extraction import threshold_ink
+        from tactile_sl_decoder.extract.extraction import threshold_ink
 
         mask = threshold_ink(gray, self.params)
         return cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, cv2.CV_32S,
@@ -184,8 +184,8 @@ class Floor:
 def in_process(args: argparse.Namespace) -> int:
     """Per-stage timing over all frames, the floor, and the accuracy table."""
     from tactile_sl_camera.images import to_gray
-    from tactile_sl_decoder.e2e_metrics import aggregate, format_table, frame_metrics
-    from tactile_sl_decoder.pipeline import bag_frames
+    from tactile_sl_decoder.frames import bag_frames
+    from tactile_sl_decoder.tooling.e2e_metrics import aggregate, format_table, frame_metrics
 
     _set_threads(args.cpu_threads)
     pipe = _pipeline(args)
@@ -302,7 +302,7 @@ def _touch_stage(pipe):
 
 def flips(args: argparse.Namespace) -> int:
     """Coverage and wrong cells with and without random label flips."""
-    from tactile_sl_decoder.e2e_metrics import evaluate_bag, flip_labels_hook
+    from tactile_sl_decoder.tooling.e2e_metrics import evaluate_bag, flip_labels_hook
 
     _set_threads(args.cpu_threads)
     pipe = _pipeline(args)

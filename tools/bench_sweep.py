@@ -172,8 +172,8 @@ class Sweep:
     def run_row(self, names: list[str], level: int) -> RowFigures:
         from tactile_sl_camera.clouds import pack_points
         from tactile_sl_camera.sim.render import Nuisances
-        from tactile_sl_decoder.e2e_metrics import frame_metrics
-        from tactile_sl_decoder.stereo import StereoRig as DecoderRig
+        from tactile_sl_decoder.stereo.stereo import StereoRig as DecoderRig
+        from tactile_sl_decoder.tooling.e2e_metrics import frame_metrics
 
         out = RowFigures()
         for frame in range(self.frames):

@@ -26,8 +26,8 @@ import numpy as np
 
 from tactile_sl_camera.elasticity import Elastomer
 from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
+from tactile_sl_decoder.tooling.touch_metrics import evaluate_touch_bag, format_report, sensor_text
 from tactile_sl_decoder.touch.sensor import SensorConfig
-from tactile_sl_decoder.touch_metrics import evaluate_touch_bag, format_report, sensor_text
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"

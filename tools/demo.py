@@ -36,17 +36,17 @@ from sensor_msgs.msg import Image, PointCloud2
 from tactile_sl_camera.bag_io import stamp_to_ns
 from tactile_sl_camera.clouds import FIELD_FORCE_DTYPE, cloud_to_arrays
 from tactile_sl_camera.images import to_gray
-from tactile_sl_decoder.e2e_metrics import (
+from tactile_sl_decoder.frames import bag_frames
+from tactile_sl_decoder.glyphs import glyphs_from_symbol_array
+from tactile_sl_decoder.pipeline import PatternSpec
+from tactile_sl_decoder.tooling.e2e_metrics import (
     aggregate,
     format_table,
     frame_metrics,
     render_cloud,
     render_overlay,
 )
-from tactile_sl_decoder.pipeline import PatternSpec, bag_frames, glyphs_from_symbol_array
-from tactile_sl_decoder.touch.contact import depth_grid
-from tactile_sl_decoder.touch.sensor import SensorFileError, sensor_yaml_text
-from tactile_sl_decoder.touch_metrics import (
+from tactile_sl_decoder.tooling.touch_metrics import (
     has_touch_truth,
     read_truths,
     render_depth,
@@ -54,6 +54,8 @@ from tactile_sl_decoder.touch_metrics import (
     resolve_sensor,
     sensor_text,
 )
+from tactile_sl_decoder.touch.contact import depth_grid
+from tactile_sl_decoder.touch.sensor import SensorFileError, sensor_yaml_text
 from tactile_sl_msgs.msg import Contact, SymbolArray
 
 REPO = pathlib.Path(__file__).resolve().parents[1]

@@ -25,7 +25,7 @@ def test_defaults_are_off_and_bundled_bag_frame_is_unchanged():
     assert nz.exposure_right == 1.0 and nz.exposure_jitter_camera == 0
     # the first frame of a bundled bag renders to the very same bytes as before the keys
     from tactile_sl_camera.images import to_gray
-    from tactile_sl_decoder.pipeline import bag_frames
+    from tactile_sl_decoder.frames import bag_frames
 
     scene = next(s for s in load_scenes(REPO / "bags" / "scenes.yaml") if s.name == "no_contact")
     frame = render_scene_frame(scene, RendererCache().get(scene), 0)

@@ -33,7 +33,7 @@ class Glyphs:
     row: np.ndarray | None = None
     col: np.ndarray | None = None
     neighbours: tuple[np.ndarray, np.ndarray] | None = None
-    """k-NN table of (u, v) (:func:`~tactile_sl_decoder.grid.nearest_neighbours`), if the
+    """k-NN table of (u, v) (:func:`~tactile_sl_decoder.decode.grid.nearest_neighbours`), if the
     pipeline computed it already (in a worker thread); else decoding computes it."""
     rectified: np.ndarray | None = None
     """(N, 2) undistorted + rectified pixels of (u, v), if a worker computed them already."""

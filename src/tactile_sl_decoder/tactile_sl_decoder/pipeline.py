@@ -9,9 +9,9 @@ produce identical points for the same input.  Inputs are checked here (sizes aga
 CameraInfo, degenerate calibration) and problems raise :class:`PipelineInputError` with a
 message meant for the user; callers skip the frame and carry on.
 
-Glyph arrays (:mod:`.glyphs`), bag frames and stereo pairing (:mod:`.frames`) and library
-thread settings (:mod:`.cpu_threads`) live in their own modules; their public names are
-re-exported here.
+The stages it composes live in :mod:`.extract`, :mod:`.classify`, :mod:`.decode` and
+:mod:`.stereo`; glyph arrays in :mod:`.glyphs`, bag frames and stereo pairing in
+:mod:`.frames`, library thread settings in :mod:`.cpu_threads` (import them from there).
 """
 from __future__ import annotations
 
@@ -25,25 +25,12 @@ import numpy as np
 
 from tactile_sl_camera.camera_info import CameraInfoError
 from tactile_sl_camera.clouds import POINT_DTYPE, pack_points
-from tactile_sl_decoder.codewords import Codebook, CodewordDecoder, DecodeParams
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
-from tactile_sl_decoder.frames import (  # noqa: F401
-    BagFrame,
-    StereoSync,
-    SyncEvent,
-    bag_frames,
-    bag_topics,
-    count_bag_frames,
-)
-from tactile_sl_decoder.glyphs import (  # noqa: F401
-    LABEL_UNKNOWN,
-    Glyphs,
-    PipelineInputError,
-    glyphs_from_symbol_array,
-)
-from tactile_sl_decoder.grid import GridParams, build_grid, nearest_neighbours
-from tactile_sl_decoder.outliers import OutlierParams, surface_outliers
-from tactile_sl_decoder.stereo import StereoParams, StereoRig, match_and_triangulate
+from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
+from tactile_sl_decoder.decode.grid import GridParams, build_grid, nearest_neighbours
+from tactile_sl_decoder.glyphs import LABEL_UNKNOWN, Glyphs, PipelineInputError
+from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
+from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig, match_and_triangulate
 
 
 @dataclass
@@ -54,7 +41,7 @@ class PipelineParams:
     decode: DecodeParams = field(default_factory=DecodeParams)
     stereo: StereoParams = field(default_factory=StereoParams)
     outliers: OutlierParams = field(default_factory=OutlierParams)
-    extraction: Any = None          # tactile_sl_decoder.extraction.ExtractionParams
+    extraction: Any = None          # tactile_sl_decoder.extract.extraction.ExtractionParams
     threads: int = 2                # >1: extract + classify left and right concurrently
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
     switch_interval_ms: float = 1.0  # with threads > 1: Python's GIL switch interval at most
@@ -128,7 +115,7 @@ class StereoPipeline:
 
     def _extract(self, gray: np.ndarray) -> Any:
         if self._extractor is None:
-            from tactile_sl_decoder.extraction import extract_symbols
+            from tactile_sl_decoder.extract.extraction import extract_symbols
 
             self._extractor = extract_symbols
         return self._extractor(gray, self.params.extraction)
@@ -136,7 +123,7 @@ class StereoPipeline:
     def load_classifier(self) -> Any:
         """The classifier, loaded on first use from ``params.classifier_weights``."""
         if self.classifier is None:
-            from tactile_sl_decoder.classifier import Classifier
+            from tactile_sl_decoder.classify.classifier import Classifier
 
             self.classifier = Classifier.load(self.params.classifier_weights,
                                               self.params.classifier_threshold)

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_sl_decoder.extraction import Detections
+from tactile_sl_decoder.extract.extraction import Detections
 
 LABEL_UNKNOWN = 255
 CELL_UNKNOWN = -1

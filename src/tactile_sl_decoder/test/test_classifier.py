@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from tactile_sl_decoder.classifier import (
+from tactile_sl_decoder.classify.classifier import (
     DEFAULT_THRESHOLD,
     FORMAT,
     FORMAT_VERSION,
@@ -13,10 +13,10 @@ from tactile_sl_decoder.classifier import (
     FastLeNet,
     default_weights_path,
 )
-from tactile_sl_decoder.extraction import extract_symbols
-from tactile_sl_decoder.model import ARCH, GlyphNet, standardise
-from tactile_sl_decoder.synth_glyphs import synth_image
-from tactile_sl_decoder.training import label_detections, save_blob
+from tactile_sl_decoder.classify.model import ARCH, GlyphNet, standardise
+from tactile_sl_decoder.extract.extraction import extract_symbols
+from tactile_sl_decoder.tooling.synth_glyphs import synth_image
+from tactile_sl_decoder.tooling.training import label_detections, save_blob
 
 
 def _blob(model: GlyphNet, **over):

@@ -2,8 +2,13 @@
 import numpy as np
 import pytest
 
-from tactile_sl_decoder.codewords import Codebook, CodewordDecoder, DecodeParams, PatternError
-from tactile_sl_decoder.grid import build_grid
+from tactile_sl_decoder.decode.codewords import (
+    Codebook,
+    CodewordDecoder,
+    DecodeParams,
+    PatternError,
+)
+from tactile_sl_decoder.decode.grid import build_grid
 
 from small_patterns import make_pattern
 

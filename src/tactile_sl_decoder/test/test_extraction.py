@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.extraction import (
+from tactile_sl_decoder.extract.extraction import (
     PATCH_SIZE,
     Detections,
     ExtractionParams,
@@ -14,7 +14,7 @@ from tactile_sl_decoder.extraction import (
     sample_patches,
     threshold_ink,
 )
-from tactile_sl_decoder.synth_glyphs import finish, render_at, synth_image
+from tactile_sl_decoder.tooling.synth_glyphs import finish, render_at, synth_image
 
 
 def _match(det: Detections, u: np.ndarray, v: np.ndarray, spacing: float):
@@ -169,7 +169,7 @@ def test_threshold_matches_cv2_adaptive_threshold(offset, dark):
                                        (116, 0, 524, 480), (3, 5, 77, 101)])
 def test_ink_box_labels_like_the_whole_image(x0, y0, w, h):
     """Labelling only the (even-aligned) ink box gives the same regions in the same order."""
-    from tactile_sl_decoder.extraction import _ink_box
+    from tactile_sl_decoder.extract.extraction import _ink_box
 
     gray = np.ascontiguousarray(synth_image(np.random.default_rng(4), spacing=16.0).gray[
         y0:y0 + h, x0:x0 + w])

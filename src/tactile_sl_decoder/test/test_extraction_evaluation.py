@@ -4,7 +4,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from tactile_sl_decoder.evaluation import (
+from tactile_sl_decoder.tooling.evaluation import (
     ImageSymbolMetrics,
     aggregate,
     classification_section,
@@ -67,7 +67,7 @@ def test_bundled_bag_extraction_figures():
     bag = REPO / "bags" / "no_contact.mcap"
     if not bag.is_file():
         pytest.skip("bundled bags not present")
-    from tactile_sl_decoder.classifier import Classifier
+    from tactile_sl_decoder.classify.classifier import Classifier
 
     values = np.zeros((200, 200), np.uint8)  # labels do not matter for extraction figures
     rows = evaluate_symbols_bag(bag, values, Classifier.load(), max_frames=1)

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from tactile_sl_decoder.grid import OFFSETS, build_grid, window_indices
+from tactile_sl_decoder.decode.grid import OFFSETS, build_grid, window_indices
 
 
 def _lattice(rows=26, cols=32, spacing=18.0, stretch=0.4, angle_deg=7.0, shear=0.0, seed=0,
@@ -98,7 +98,7 @@ def test_tiny_inputs_give_no_links(n):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_fast_matching_equals_exhaustive_matching(seed, shear):
     """Candidate matching via rounded lattice coordinates == the (N, 8, K) comparison."""
-    from tactile_sl_decoder import grid as G
+    from tactile_sl_decoder.decode import grid as G
 
     u, v, _, _ = _lattice(seed=seed, shear=shear, noise=2.0, spurious=0.1)
     calls = {}
@@ -126,7 +126,7 @@ def test_fast_matching_equals_exhaustive_matching(seed, shear):
 
 
 def test_precomputed_neighbours_give_the_same_grid():
-    from tactile_sl_decoder.grid import GridParams, nearest_neighbours
+    from tactile_sl_decoder.decode.grid import GridParams, nearest_neighbours
 
     u, v, _, _ = _lattice(seed=3)
     ref = build_grid(u, v, spacing_hint=18.0)
@@ -137,7 +137,7 @@ def test_precomputed_neighbours_give_the_same_grid():
 
 
 def test_smoothing_is_the_median_of_the_found_members():
-    from tactile_sl_decoder.grid import _smooth
+    from tactile_sl_decoder.decode.grid import _smooth
 
     rng = np.random.default_rng(0)
     vec = rng.normal(size=(200, 4))

@@ -1,10 +1,10 @@
-"""Geometric outlier rejection (outliers.py) and the robustness bags of issue 11."""
+"""Geometric outlier rejection (stereo/outliers.py) and the robustness bags of issue 11."""
 import pathlib
 
 import numpy as np
 import pytest
 
-from tactile_sl_decoder.outliers import OutlierParams, surface_outliers
+from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
 
 REPO = pathlib.Path(__file__).resolve().parents[3]
 PITCH = 5e-4
@@ -67,8 +67,8 @@ def test_disabled_or_tiny_clouds_are_left_alone():
 @pytest.mark.parametrize("name", ["robust_dark_object", "robust_damaged_print",
                                   "robust_textured_object"])
 def test_robustness_bags_decode_without_wrong_cells(name):
-    from tactile_sl_decoder.e2e_metrics import evaluate_bag
     from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+    from tactile_sl_decoder.tooling.e2e_metrics import evaluate_bag
 
     bag = REPO / "bags" / f"{name}.mcap"
     if not bag.exists():

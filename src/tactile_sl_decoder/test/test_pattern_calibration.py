@@ -34,7 +34,7 @@ from tactile_sl_decoder.calibrate.simulate import (
     write_views,
 )
 from tactile_sl_decoder.cli import calibrate_cmd
-from tactile_sl_decoder.stereo import StereoRig
+from tactile_sl_decoder.stereo.stereo import StereoRig
 
 
 def _cli(*argv):

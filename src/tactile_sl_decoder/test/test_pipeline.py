@@ -11,17 +11,10 @@ from tactile_sl_camera.bag_io import BagReader, BagWriter
 from tactile_sl_camera.camera_info import CameraCalibration, camera_info_fields
 from tactile_sl_camera.clouds import cloud_fields, cloud_to_arrays, pack_points
 from tactile_sl_camera.images import image_fields
-from tactile_sl_decoder.e2e_metrics import aggregate, frame_metrics
-from tactile_sl_decoder.pipeline import (
-    Glyphs,
-    PatternSpec,
-    PipelineInputError,
-    PipelineParams,
-    StereoPipeline,
-    StereoSync,
-    bag_frames,
-    glyphs_from_symbol_array,
-)
+from tactile_sl_decoder.frames import StereoSync, bag_frames
+from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError, glyphs_from_symbol_array
+from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+from tactile_sl_decoder.tooling.e2e_metrics import aggregate, frame_metrics
 
 from small_patterns import make_pattern
 
@@ -249,7 +242,7 @@ def test_shipped_pattern_decodes_and_matches_the_printed_artwork():
 
 
 def test_demo_pictures(scene):
-    from tactile_sl_decoder.e2e_metrics import render_cloud, render_overlay
+    from tactile_sl_decoder.tooling.e2e_metrics import render_cloud, render_overlay
 
     pipe = StereoPipeline(PATTERN)
     gl, _ = _glyphs(scene, scene.uv_l, 5)
@@ -267,7 +260,7 @@ def test_e2e_section_reports_per_frame_and_per_bag(tmp_path):
     import argparse
     import json
 
-    from tactile_sl_decoder.e2e_metrics import e2e_section
+    from tactile_sl_decoder.tooling.e2e_metrics import e2e_section
 
     bag = REPO / "bags" / "no_contact.mcap"
     args = argparse.Namespace(pattern=None, weights=None, namespace="/tactile", max_frames=1,

@@ -105,7 +105,7 @@ def test_unwritable_replay_output_is_one_line(tmp_path, bag, capsys):
 
 
 def test_train_checks_its_output_before_training(tmp_path, capsys, monkeypatch):
-    import tactile_sl_decoder.training as training
+    import tactile_sl_decoder.tooling.training as training
 
     monkeypatch.setattr(training, "render_dataset",
                         lambda *a, **k: pytest.fail("rendered before checking the output"))
@@ -195,7 +195,7 @@ def test_pattern_breaking_its_own_min_hamming_is_refused(tmp_path, bag, capsys):
 def test_classifier_for_another_alphabet_is_refused(tmp_path, bag, capsys):
     import torch
 
-    from tactile_sl_decoder.classifier import default_weights_path
+    from tactile_sl_decoder.classify.classifier import default_weights_path
 
     blob = torch.load(default_weights_path(), map_location="cpu", weights_only=True)
     state = blob["state_dict"]

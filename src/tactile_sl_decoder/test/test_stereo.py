@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tactile_sl_camera.camera_info import CameraCalibration, CameraInfoError, camera_info_fields
-from tactile_sl_decoder.stereo import StereoRig, match_and_triangulate
+from tactile_sl_decoder.stereo.stereo import StereoRig, match_and_triangulate
 
 
 def _rig(alpha: float = 0.0, distort: bool = True):

@@ -4,7 +4,7 @@ import types
 import numpy as np
 import pytest
 
-from tactile_sl_decoder.extraction import Detections, extract_symbols
+from tactile_sl_decoder.extract.extraction import Detections, extract_symbols
 from tactile_sl_decoder.symbol_array import (
     CELL_UNKNOWN,
     LABEL_UNKNOWN,
@@ -14,7 +14,7 @@ from tactile_sl_decoder.symbol_array import (
     from_message,
     to_fields,
 )
-from tactile_sl_decoder.synth_glyphs import synth_image
+from tactile_sl_decoder.tooling.synth_glyphs import synth_image
 
 
 def _detections(n=5):

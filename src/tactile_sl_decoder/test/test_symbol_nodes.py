@@ -35,7 +35,7 @@ def test_chain_labels_images_and_survives_bad_input(tmp_path):
     from sensor_msgs.msg import Image
 
     from tactile_sl_camera.images import image_fields
-    from tactile_sl_decoder.synth_glyphs import synth_image
+    from tactile_sl_decoder.tooling.synth_glyphs import synth_image
     from tactile_sl_msgs.msg import SymbolArray
 
     domain = 30 + os.getpid() % 30

@@ -1,4 +1,4 @@
-"""Touch figures (tactile_sl_decoder.touch_metrics): metrics with known errors, pictures,
+"""Touch figures (tactile_sl_decoder.tooling.touch_metrics): metrics with known errors, pictures,
 and the `tactile-sl evaluate` touch section on a bundled touch bag."""
 import argparse
 import json
@@ -10,9 +10,7 @@ import pytest
 
 from tactile_sl_camera.clouds import pack_field
 from tactile_sl_camera.sim.loads import TouchTruth
-from tactile_sl_decoder.touch.contact import ContactState
-from tactile_sl_decoder.touch.stage import TouchResult
-from tactile_sl_decoder.touch_metrics import (
+from tactile_sl_decoder.tooling.touch_metrics import (
     CHECKS,
     bag_totals,
     compare_frame,
@@ -23,6 +21,8 @@ from tactile_sl_decoder.touch_metrics import (
     resolve_sensor,
     touch_section,
 )
+from tactile_sl_decoder.touch.contact import ContactState
+from tactile_sl_decoder.touch.stage import TouchResult
 
 REPO = pathlib.Path(__file__).resolve().parents[3]
 PITCH = 5e-4

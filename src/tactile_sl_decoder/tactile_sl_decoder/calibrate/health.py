@@ -33,8 +33,8 @@ import numpy as np
 
 from tactile_sl_camera.calibration import CalibrationError, StereoCalibrationResult
 from tactile_sl_camera.camera_info import CameraCalibration
-from tactile_sl_decoder.pipeline import Glyphs
-from tactile_sl_decoder.stereo import StereoRig
+from tactile_sl_decoder.glyphs import Glyphs
+from tactile_sl_decoder.stereo.stereo import StereoRig
 
 from .views import CameraView, PatternTarget, StereoView
 

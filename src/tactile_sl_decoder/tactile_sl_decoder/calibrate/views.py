@@ -14,7 +14,8 @@ from typing import Any, Iterable, Iterator
 
 import numpy as np
 
-from tactile_sl_decoder.pipeline import Glyphs, PatternSpec, PipelineParams, StereoPipeline
+from tactile_sl_decoder.glyphs import Glyphs
+from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 
 
 @dataclass

@@ -297,7 +297,7 @@ def _untouched(args: argparse.Namespace, bag: str) -> tuple[list[Any], Any, Any]
     from tactile_sl_camera.camera_info import calibration_from_msg, load_camera_info_yaml
     from tactile_sl_camera.images import to_gray
     from tactile_sl_decoder.calibrate import ViewDecoder
-    from tactile_sl_decoder.pipeline import bag_frames
+    from tactile_sl_decoder.frames import bag_frames
 
     if args.frames < 1:
         raise ValueError("--frames must be at least 1")
@@ -331,7 +331,7 @@ def _untouched(args: argparse.Namespace, bag: str) -> tuple[list[Any], Any, Any]
 def _run_check(args: argparse.Namespace) -> int:
     """Health check in place: figures and a verdict (exit status 0 pass, 1 fail)."""
     from tactile_sl_decoder.calibrate.health import calibration_health
-    from tactile_sl_decoder.stereo import StereoRig
+    from tactile_sl_decoder.stereo.stereo import StereoRig
 
     views, left, right = _untouched(args, args.check)
     report = calibration_health([v.left for v in views], [v.right for v in views],
@@ -346,7 +346,7 @@ def _run_refine(args: argparse.Namespace) -> int:
     from tactile_sl_camera.camera_info import camera_info_yaml_text
     from tactile_sl_decoder.calibrate import write_atomically
     from tactile_sl_decoder.calibrate.health import calibration_health, refine_extrinsics
-    from tactile_sl_decoder.stereo import StereoRig
+    from tactile_sl_decoder.stereo.stereo import StereoRig
 
     views, left, right = _untouched(args, args.refine)
     target = _target(args)
@@ -369,13 +369,9 @@ def _run_force(args: argparse.Namespace) -> int:
     """Fit the elastomer to a recording with known loads; write OUT/sensor.yaml."""
     from tactile_sl_camera.images import to_gray
     from tactile_sl_decoder.calibrate import write_atomically
-    from tactile_sl_decoder.pipeline import (
-        PatternSpec,
-        PipelineInputError,
-        PipelineParams,
-        StereoPipeline,
-        bag_frames,
-    )
+    from tactile_sl_decoder.frames import bag_frames
+    from tactile_sl_decoder.glyphs import PipelineInputError
+    from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
     from tactile_sl_decoder.touch.force_calibration import calibrate_forces, load_loads_file
     from tactile_sl_decoder.touch.sensor import load_sensor, sensor_yaml_text
 

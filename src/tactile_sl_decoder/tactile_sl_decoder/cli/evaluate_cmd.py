@@ -59,7 +59,7 @@ def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
             raise
         # the shipped pattern must match the shipped artwork; read the values from it
         from tactile_sl_camera.sim import load_artwork
-        from tactile_sl_decoder.training import DEFAULT_PRIMITIVES, artwork_values
+        from tactile_sl_decoder.tooling.training import DEFAULT_PRIMITIVES, artwork_values
 
         print(f"evaluate: warning: shipped pattern unreadable ({exc}); reading cell values "
               "from the simulator artwork instead", file=sys.stderr)
@@ -70,8 +70,8 @@ def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
 def symbol_sections(args: argparse.Namespace, bags: list[Path]) -> str:
     """Extraction, classification and confusion tables of every bag, plus JSON."""
     from tactile_sl_camera.bag_io import BagError
-    from tactile_sl_decoder.classifier import Classifier
-    from tactile_sl_decoder.evaluation import (
+    from tactile_sl_decoder.classify.classifier import Classifier
+    from tactile_sl_decoder.tooling.evaluation import (
         aggregate,
         classification_section,
         confusion_section,
@@ -138,7 +138,7 @@ def _by_scene(rows: list[Any], totals: list[Any]) -> list[list[Any]]:
 
 def e2e_sections(args: argparse.Namespace, bags: list[Path]) -> str:
     """End-to-end figures: coverage, wrong cells, 3-D error against ground truth."""
-    from tactile_sl_decoder.e2e_metrics import e2e_section
+    from tactile_sl_decoder.tooling.e2e_metrics import e2e_section
 
     return e2e_section(args, bags)
 
@@ -146,8 +146,8 @@ def e2e_sections(args: argparse.Namespace, bags: list[Path]) -> str:
 def touch_sections(args: argparse.Namespace, bags: list[Path]) -> str:
     """Touch figures (displacement, force, moment, contact) of bags with touch ground truth."""
     from tactile_sl_camera.bag_io import BagError
+    from tactile_sl_decoder.tooling.touch_metrics import touch_section
     from tactile_sl_decoder.touch.sensor import SensorFileError
-    from tactile_sl_decoder.touch_metrics import touch_section
 
     try:
         return touch_section(args, bags)

@@ -55,16 +55,11 @@ def run(args: argparse.Namespace) -> int:
     from tactile_sl_camera.images import ImageFormatError, to_gray
     from tactile_sl_camera.safe_files import OutputError, check_output, same_file
     from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
-    from tactile_sl_decoder.codewords import PatternError
-    from tactile_sl_decoder.e2e_metrics import progress_bar
-    from tactile_sl_decoder.pipeline import (
-        PipelineInputError,
-        PipelineParams,
-        StereoPipeline,
-        bag_frames,
-        bag_topics,
-        count_bag_frames,
-    )
+    from tactile_sl_decoder.decode.codewords import PatternError
+    from tactile_sl_decoder.frames import bag_frames, bag_topics, count_bag_frames
+    from tactile_sl_decoder.glyphs import PipelineInputError
+    from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline
+    from tactile_sl_decoder.tooling.e2e_metrics import progress_bar
 
     out_path = Path(args.output)
     try:     # OUT must not be IN: decided by the file system (hard links, bag directories)

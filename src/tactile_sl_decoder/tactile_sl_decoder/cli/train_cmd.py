@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from tactile_sl_decoder.classifier import DEFAULT_THRESHOLD, default_weights_path
+from tactile_sl_decoder.classify.classifier import DEFAULT_THRESHOLD, default_weights_path
 from tactile_sl_decoder.cli.argtypes import number
 
 
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
-    from tactile_sl_decoder.training import (
+    from tactile_sl_decoder.tooling.training import (
         DEFAULT_PRIMITIVES,
         HELDOUT_KINDS,
         TRAIN_KINDS,

@@ -38,19 +38,13 @@ from tactile_sl_camera.nodes.parameters import (
 )
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.checks import check_classifier, check_threshold, load_pattern_spec
+from tactile_sl_decoder.frames import StereoSync
+from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError, glyphs_from_symbol_array
 from tactile_sl_decoder.nodes.diagnostics import DecoderDiagnostics, DiagnosticLimits, Status
 from tactile_sl_decoder.nodes.diagnostics_publisher import DiagnosticsPublisher
 from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
 from tactile_sl_decoder.nodes.touch_outputs import TouchOutputs
-from tactile_sl_decoder.pipeline import (
-    Glyphs,
-    PipelineInputError,
-    PipelineParams,
-    StereoPipeline,
-    StereoResult,
-    StereoSync,
-    glyphs_from_symbol_array,
-)
+from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline, StereoResult
 
 try:
     from tactile_sl_msgs.msg import SymbolArray

@@ -15,7 +15,7 @@ from rclpy.node import Node
 
 from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_camera.nodes.runner import run_node
-from tactile_sl_decoder.classifier import PATCH, Classifier
+from tactile_sl_decoder.classify.classifier import PATCH, Classifier
 from tactile_sl_decoder.symbol_array import SymbolArrayError, fill_message, from_message
 from tactile_sl_msgs.msg import SymbolArray
 

@@ -3,8 +3,8 @@
 Topics (relative, remap as needed): ``image`` in (sensor_msgs/Image, sensor-data QoS;
 mono8, bgr8, rgb8 ...), ``symbols`` out (tactile_sl_msgs/SymbolArray, reliable, labels 255
 and cells -1 until the classifier and decoder fill them). Parameters mirror
-:class:`tactile_sl_decoder.extraction.ExtractionParams` (see config/symbol_extractor.yaml), with
-ranges, applied live (``patch_size`` and ``threads`` at start only).
+:class:`~tactile_sl_decoder.extract.extraction.ExtractionParams` (config/symbol_extractor.yaml),
+with ranges, applied live (``patch_size`` and ``threads`` at start only).
 A message that cannot be used (unsupported encoding, empty or truncated image) is skipped
 with a throttled warning; the node never dies on input.
 """
@@ -20,7 +20,7 @@ from sensor_msgs.msg import Image
 from tactile_sl_camera.images import ImageFormatError, to_gray
 from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_camera.nodes.runner import run_node
-from tactile_sl_decoder.extraction import extract_symbols
+from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
 from tactile_sl_decoder.symbol_array import Symbols, fill_message
 from tactile_sl_msgs.msg import SymbolArray

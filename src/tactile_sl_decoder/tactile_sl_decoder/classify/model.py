@@ -4,7 +4,7 @@
 (ceil mode, so the 3x3 map becomes 2x2 and no input pixel is ignored) -> FC 32 -> FC 64 ->
 one logit per symbol. Patches are standardised per patch (zero mean, unit variance) before
 the first layer, which removes the lighting level and contrast of the pad where the glyph
-lies. ``numpy_forward`` in :mod:`tactile_sl_decoder.classifier` computes the same function
+lies. ``numpy_forward`` in :mod:`tactile_sl_decoder.classify.classifier` computes the same function
 without torch, for speed.
 """
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Glyph classification: load the shipped LeNet weights and label patches fast on one core.
 
-Training uses torch (:mod:`tactile_sl_decoder.model`); inference computes the same function
+Training uses torch (:mod:`tactile_sl_decoder.classify.model`); inference computes the same function
 as a handful of large matrix products (torch tensors, single calls that release the GIL),
 because torch's default CPU path costs 7-9 ms for 1,000 patches of a net this small
 (framework overhead per layer, tiny convolutions), against a 4 ms budget:
@@ -51,7 +51,7 @@ class ClassifierError(ValueError):
 
 def default_weights_path() -> Path:
     """The weights the package ships (trained by ``tactile-sl train``)."""
-    return Path(__file__).resolve().parent / "data" / "classifier.pt"
+    return Path(__file__).resolve().parent.parent / "data" / "classifier.pt"
 
 
 def check_state(state: dict[str, Any]) -> int:
@@ -73,7 +73,7 @@ def check_state(state: dict[str, Any]) -> int:
 
 @dataclass
 class FastLeNet:
-    """The numpy form of :class:`tactile_sl_decoder.model.GlyphNet` (same outputs, ~1e-5)."""
+    """The numpy form of :class:`~tactile_sl_decoder.classify.model.GlyphNet` (same outputs)."""
 
     t1a: np.ndarray  # (60, 48) banded conv1 matrix: 5 rows x input cols 0..11 -> cols 0..7
     t1b: np.ndarray  # (50, 36) banded conv1 matrix: 5 rows x input cols 8..17 -> cols 8..13

@@ -183,7 +183,7 @@ def evaluate_bag(path: str | Path, pipeline: Any, namespace: str = "/tactile",
     Frames without ground truth are skipped.
     """
     from tactile_sl_camera.images import to_gray
-    from tactile_sl_decoder.pipeline import bag_frames, count_bag_frames
+    from tactile_sl_decoder.frames import bag_frames, count_bag_frames
 
     pitch = float(getattr(pipeline.pattern, "pitch_m", 0.0) or 0.0)
     tol = match_tol_m if match_tol_m is not None else (0.5 * pitch if pitch > 0 else 2.5e-4)
@@ -245,7 +245,7 @@ def e2e_section(args: Any, bags: list[Path]) -> str:
     classifier = None
     weights = getattr(args, "weights", None)
     if weights:
-        from tactile_sl_decoder.classifier import Classifier
+        from tactile_sl_decoder.classify.classifier import Classifier
 
         classifier = Classifier.load(weights)
     pattern = getattr(args, "pattern", None)

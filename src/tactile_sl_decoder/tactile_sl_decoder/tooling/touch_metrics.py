@@ -330,8 +330,8 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
     Timings per frame: ``pipeline`` (the pipeline's total) and ``touch`` (the stage's).
     """
     from tactile_sl_camera.images import to_gray
-    from tactile_sl_decoder.e2e_metrics import progress_bar
-    from tactile_sl_decoder.pipeline import bag_frames, count_bag_frames
+    from tactile_sl_decoder.frames import bag_frames, count_bag_frames
+    from tactile_sl_decoder.tooling.e2e_metrics import progress_bar
     from tactile_sl_decoder.touch.reference import ReferenceError
     from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
 
@@ -512,7 +512,7 @@ def touch_section(args: Any, bags: list[Path]) -> str:
     classifier = None
     weights = getattr(args, "weights", None)
     if weights:
-        from tactile_sl_decoder.classifier import Classifier
+        from tactile_sl_decoder.classify.classifier import Classifier
 
         classifier = Classifier.load(weights)
     pipe = StereoPipeline(PatternSpec.load(getattr(args, "pattern", None)), classifier)

@@ -24,8 +24,8 @@ from typing import Any, Callable, TextIO
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.classifier import ARCH, FORMAT, FORMAT_VERSION
-from tactile_sl_decoder.extraction import ExtractionParams, extract_symbols
+from tactile_sl_decoder.classify.classifier import ARCH, FORMAT, FORMAT_VERSION
+from tactile_sl_decoder.extract.extraction import ExtractionParams, extract_symbols
 
 DEFAULT_PRIMITIVES = ("line", "circle", "triangle")
 TRAIN_KINDS = ("sphere", "cylinder")
@@ -245,8 +245,8 @@ def train(train_set: PatchSet, val_set: PatchSet, classes: int, primitives: list
     """Train GlyphNet with Adam + cosine decay; returns the weights blob and held-out figures."""
     import torch
 
-    from tactile_sl_decoder.classifier import Classifier
-    from tactile_sl_decoder.model import GlyphNet, standardise
+    from tactile_sl_decoder.classify.classifier import Classifier
+    from tactile_sl_decoder.classify.model import GlyphNet, standardise
 
     start = time.monotonic()
     torch.manual_seed(seed)

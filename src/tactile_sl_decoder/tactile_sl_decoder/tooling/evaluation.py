@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.extraction import ExtractionParams, extract_symbols
+from tactile_sl_decoder.extract.extraction import ExtractionParams, extract_symbols
 
 LABEL_UNKNOWN = 255
 
@@ -148,7 +148,7 @@ def evaluate_symbols_bag(path: str | Path, values: np.ndarray, classifier: Any,
     from tactile_sl_camera.camera_info import calibration_from_msg
     from tactile_sl_camera.clouds import cloud_to_arrays
     from tactile_sl_camera.images import to_gray
-    from tactile_sl_decoder.pipeline import bag_frames, count_bag_frames
+    from tactile_sl_decoder.frames import bag_frames, count_bag_frames
 
     scene = Path(path).stem
     total = count_bag_frames(path, namespace)

@@ -32,7 +32,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.grid import Grid, window_indices
+from tactile_sl_decoder.decode.grid import Grid, window_indices
 
 LABEL_UNKNOWN = 255
 CELL_UNKNOWN = -1

@@ -1,0 +1,1 @@
+"""Stage 1, image -> glyphs: find the glyphs of one grey image and sample their patches."""

@@ -1,0 +1,1 @@
+"""Stage 4, cells -> points: stereo pairing by cell, triangulation and outlier removal."""
