@@ -1,0 +1,118 @@
+"""Dependency rules of tactile_sl_decoder (docs/architecture.md), read from the imports.
+
+Data flows one way, image -> glyphs -> labels -> cells -> points -> touch: a stage imports
+no rclpy, no node, no CLI and no tooling, and never a later stage.  The shared library
+modules the stages and the pipeline build on follow the same rule.  Every import counts,
+including those inside functions (read with :mod:`ast`, nothing is imported).
+"""
+from __future__ import annotations
+
+import ast
+import pathlib
+
+import pytest
+
+PKG = pathlib.Path(__file__).resolve().parents[1] / "tactile_sl_decoder"
+NAME = "tactile_sl_decoder"
+
+STAGES = ["extract", "classify", "decode", "stereo", "touch"]   # in data-flow order
+SHARED = ["pipeline.py", "glyphs.py", "frames.py", "symbol_array.py", "checks.py",
+          "cpu_threads.py", "contract.py"]
+FORBIDDEN = ("rclpy", f"{NAME}.nodes", f"{NAME}.cli", f"{NAME}.tooling", "tactile_sl_camera.nodes")
+
+
+def _module_name(path: pathlib.Path) -> str:
+    parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def imports_of(path: pathlib.Path, module_name: str | None = None) -> set[str]:
+    """Absolute names of every module ``path`` imports (relative imports resolved).
+
+    ``module_name``: the dotted name the file has (default: from its place in the package).
+    """
+    tree = ast.parse(path.read_text(), filename=str(path))
+    package = (module_name or _module_name(path)).split(".")
+    if path.name != "__init__.py":
+        package = package[:-1]
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = ".".join(package[:len(package) - node.level + 1])
+                module = f"{base}.{node.module}" if node.module else base
+            else:
+                module = node.module or ""
+            found.add(module)
+            # `from pkg import sub` may import a submodule: count pkg.sub too
+            found.update(f"{module}.{alias.name}" for alias in node.names)
+    return found
+
+
+def _is_under(name: str, prefix: str) -> bool:
+    return name == prefix or name.startswith(prefix + ".")
+
+
+def _stage_files(stage: str) -> list[pathlib.Path]:
+    return sorted((PKG / stage).rglob("*.py"))
+
+
+def test_the_stages_exist():
+    for stage in STAGES:
+        assert (PKG / stage / "__init__.py").is_file(), stage
+        assert _stage_files(stage), stage
+
+
+@pytest.mark.parametrize("stage", STAGES)
+def test_stages_import_no_rclpy_nodes_cli_or_tooling(stage):
+    bad = [f"{path.relative_to(PKG)} imports {name}"
+           for path in _stage_files(stage) for name in sorted(imports_of(path))
+           if any(_is_under(name, f) for f in FORBIDDEN)]
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("stage", STAGES)
+def test_stages_never_reach_up(stage):
+    """A stage imports no later stage and not the pipeline that composes them."""
+    later = [f"{NAME}.{s}" for s in STAGES[STAGES.index(stage) + 1:]]
+    up = later + [f"{NAME}.pipeline", f"{NAME}.calibrate"]
+    bad = [f"{path.relative_to(PKG)} imports {name}"
+           for path in _stage_files(stage) for name in sorted(imports_of(path))
+           if any(_is_under(name, u) for u in up)]
+    assert not bad, "\n".join(bad)
+
+
+def test_shared_library_modules_import_no_rclpy_nodes_cli_or_tooling():
+    bad = [f"{name_} imports {name}"
+           for name_ in SHARED if (PKG / name_).exists()
+           for name in sorted(imports_of(PKG / name_))
+           if any(_is_under(name, f) for f in FORBIDDEN)]
+    assert not bad, "\n".join(bad)
+
+
+def test_tooling_is_imported_only_by_cli_tooling_and_tools():
+    allowed = ("cli", "tooling")
+    bad = []
+    for path in sorted(PKG.rglob("*.py")):
+        rel = path.relative_to(PKG)
+        if rel.parts[0] in allowed:
+            continue
+        bad += [f"{rel} imports {name}" for name in sorted(imports_of(path))
+                if _is_under(name, f"{NAME}.tooling")]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_checker_sees_violations(tmp_path):
+    """The reader itself: absolute, relative and function-local imports are all found."""
+    probe = tmp_path / "probe.py"
+    probe.write_text("import rclpy\n"
+                     "from ..tooling import training\n"
+                     "def f():\n    from tactile_sl_decoder.nodes import decoder_node\n")
+    names = imports_of(probe, f"{NAME}.decode.probe")
+    assert "rclpy" in names
+    assert f"{NAME}.tooling.training" in names
+    assert f"{NAME}.nodes.decoder_node" in names
