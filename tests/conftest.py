@@ -9,9 +9,8 @@ import pytest
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 
 from dds_sniffer import DdsSniffer  # noqa: E402
-from ros_harness import next_domain_id  # noqa: E402
+from ros_harness import REPO, next_domain_id  # noqa: E402
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
 _sniffer: DdsSniffer | None = None
 
 

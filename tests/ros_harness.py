@@ -10,6 +10,10 @@ from typing import Callable
 
 from ament_index_python.packages import get_package_prefix
 
+REPO = pathlib.Path(__file__).resolve().parents[1]
+"""The workspace root (bags/, config/, install/), for every test of the workspace."""
+BAGS = REPO / "bags"
+
 # Domain ids 0..101 are safe on Linux; spread tests across them, away from env.sh's default 42.
 _domains = itertools.cycle(range(60 + os.getpid() % 20, 101))
 

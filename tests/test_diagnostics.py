@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from ros_harness import next_domain_id, start_node, stop
+from ros_harness import REPO, next_domain_id, start_node, stop
 
 pytestmark = pytest.mark.ros
 
@@ -22,7 +22,6 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
 BAG = REPO / "bags" / "no_contact.mcap"
 TASKS = {"input left", "input right", "processing", "coverage", "classifier",
          "touch reference", "calibration"}

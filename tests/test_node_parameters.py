@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ros_harness import next_domain_id, start_node, stop
+from ros_harness import REPO, next_domain_id, start_node, stop
 
 pytestmark = pytest.mark.ros
 
@@ -18,7 +18,6 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter, parameter_value_to_python  # noqa: E402
 from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
 CONFIGS = {  # config file -> (package, executable, extra -p overrides)
     "src/tactile_sl_camera/config/replay.yaml": ("tactile_sl_camera", "replay", "replay"),
     "src/tactile_sl_camera/config/sim_camera.yaml": ("tactile_sl_camera", "sim_camera", ""),

@@ -9,13 +9,11 @@ from __future__ import annotations
 
 import ast
 import time
-from pathlib import Path
 
 import pytest
 
-from ros_harness import next_domain_id, start_node, stop
+from ros_harness import REPO, next_domain_id, start_node, stop
 
-REPO = Path(__file__).resolve().parents[1]
 LAUNCH_FILES = sorted(REPO.glob("src/*/launch/*.launch.py"))
 
 

@@ -31,11 +31,10 @@ from netns import NetnsPair, in_netns, netns_pair, unavailable_reason, veth_coun
 
 from tactile_sl_camera.bag_io import BagReader
 
-from ros_harness import executable, ros_env, stop
+from ros_harness import REPO, executable, ros_env, stop
 
 pytestmark = pytest.mark.ros
 
-REPO = pathlib.Path(__file__).resolve().parents[1]
 BAG = REPO / "bags" / "two_contacts.mcap"      # 7 frames recorded at 10 Hz
 LISTENER = pathlib.Path(__file__).with_name("points_listener.py")
 LOOPS = 15                                    # 105 frames at 30 Hz: 3.5 s

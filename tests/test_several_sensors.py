@@ -7,11 +7,10 @@ diagnostics under its own name and hardware_id, and nothing crosses between the 
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import pytest
 
-from ros_harness import next_domain_id, start_node, stop
+from ros_harness import REPO, next_domain_id, start_node, stop
 
 pytestmark = pytest.mark.ros
 
@@ -23,7 +22,6 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import PointCloud2  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
 BAG = REPO / "bags" / "no_contact.mcap"
 SENSORS = ("left_hand", "right_hand")
 

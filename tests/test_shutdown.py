@@ -16,11 +16,10 @@ from pathlib import Path
 
 import pytest
 
-from ros_harness import next_domain_id, start_node
+from ros_harness import REPO, next_domain_id, start_node
 
 pytestmark = pytest.mark.ros
 
-REPO = Path(__file__).resolve().parents[1]
 BAD = ("Traceback", "FATAL", "ExternalShutdownException", "context is invalid", "RCLError")
 
 

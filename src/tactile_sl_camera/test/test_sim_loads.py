@@ -1,6 +1,4 @@
 """Traction-driven contacts in the simulator: scene keys, the field, touch ground truth."""
-import pathlib
-
 import numpy as np
 import pytest
 
@@ -21,6 +19,8 @@ from tactile_sl_camera.sim.loads import LoadContact, resultant, touch_truth_from
 from tactile_sl_camera.sim.render import Renderer
 from tactile_sl_camera.sim.scenes import SceneError, load_scenes, parse_scene
 from tactile_sl_camera.sim.synth import frame_messages, render_scene_frame
+
+from ros_harness import BAGS
 
 HALF = Elastomer(3.0e5, 0.49, 0.0)
 SMALL = {"x0": -0.006, "y0": -0.006, "spacing": 1e-4, "nx": 121, "ny": 121}
@@ -234,7 +234,7 @@ def test_pack_field_layout():
 
 
 def test_touch_scenes_file_is_valid():
-    path = pathlib.Path(__file__).resolve().parents[3] / "bags" / "touch_scenes.yaml"
+    path = BAGS / "touch_scenes.yaml"
     if not path.is_file():
         pytest.skip("bags/touch_scenes.yaml not present")
     scenes = {s.name: s for s in load_scenes(path)}

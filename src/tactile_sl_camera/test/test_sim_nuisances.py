@@ -1,5 +1,4 @@
 """Simulator nuisances of real sensors (issue 11): off by default, in range, doing what they say."""
-import pathlib
 
 import numpy as np
 import pytest
@@ -9,7 +8,8 @@ from tactile_sl_camera.sim.render import _line_kernel, _pillbox
 from tactile_sl_camera.sim.scenes import load_scenes
 from tactile_sl_camera.sim.synth import RendererCache, render_scene_frame
 
-REPO = pathlib.Path(__file__).resolve().parents[3]
+from ros_harness import REPO
+
 PRESS = [Contact("sphere", radius=0.004, depth=0.0006, x=0.0003, y=-0.0002)]
 
 

@@ -12,6 +12,8 @@ from tactile_sl_camera.sim.artwork import random_values, write_artwork
 from tactile_sl_camera.sim.contact import Contact, FieldGrid, PadParams
 from tactile_sl_camera.sim.scenes import SceneError, load_scenes
 
+from ros_harness import BAGS
+
 SCENES = """
 defaults: {fps: 20, seed: 3, nuisances: {noise_sigma: 1.0}}
 scenes:
@@ -138,13 +140,13 @@ def test_bad_scenes_are_clear_errors(tmp_path: pathlib.Path, text, message):
 
 
 def test_bundled_scenes_file_is_valid():
-    scenes = load_scenes(pathlib.Path(__file__).resolve().parents[3] / "bags" / "scenes.yaml")
+    scenes = load_scenes(BAGS / "scenes.yaml")
     assert {s.name for s in scenes} == {"no_contact", "sphere_shallow_wide", "sphere_deep_small",
                                         "edge", "two_contacts", "harsh_lighting"}
 
 
 def test_bundled_bags_are_small_complete_and_readable():
-    root = pathlib.Path(__file__).resolve().parents[3] / "bags"
+    root = BAGS
     bags = sorted(root.glob("*.mcap"))
     assert {b.stem for b in bags} >= {"no_contact", "sphere_shallow_wide", "sphere_deep_small",
                                        "edge", "two_contacts", "harsh_lighting"}

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-LABEL_UNKNOWN = 255
+from tactile_sl_decoder.contract import LABEL_UNKNOWN
 
 
 class PipelineInputError(ValueError):

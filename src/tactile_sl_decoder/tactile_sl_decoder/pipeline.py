@@ -25,10 +25,11 @@ import numpy as np
 
 from tactile_sl_camera.camera_info import CameraInfoError
 from tactile_sl_camera.clouds import POINT_DTYPE, pack_points
+from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
 from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
 from tactile_sl_decoder.decode.grid import GridParams, build_grid, nearest_neighbours
-from tactile_sl_decoder.glyphs import LABEL_UNKNOWN, Glyphs, PipelineInputError
+from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
 from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig, match_and_triangulate
 

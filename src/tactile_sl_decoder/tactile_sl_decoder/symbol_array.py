@@ -11,10 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.extract.extraction import Detections
-
-LABEL_UNKNOWN = 255
-CELL_UNKNOWN = -1
 
 
 class SymbolArrayError(ValueError):

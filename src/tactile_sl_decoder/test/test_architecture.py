@@ -116,3 +116,27 @@ def test_the_checker_sees_violations(tmp_path):
     assert "rclpy" in names
     assert f"{NAME}.tooling.training" in names
     assert f"{NAME}.nodes.decoder_node" in names
+
+
+CONTRACT_NAMES = {"LABEL_UNKNOWN", "CELL_UNKNOWN", "PATCH_SIZE", "PATCH"}
+
+
+def test_contract_numbers_have_one_definition():
+    """LABEL_UNKNOWN, CELL_UNKNOWN and the patch size are assigned in contract.py only."""
+    bad = []
+    for path in sorted(PKG.rglob("*.py")):
+        if path.name == "contract.py" and path.parent == PKG:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            targets = node.targets if isinstance(node, ast.Assign) else (
+                [node.target] if isinstance(node, ast.AnnAssign) else [])
+            bad += [f"{path.relative_to(PKG)}:{node.lineno} defines {t.id}"
+                    for t in targets if isinstance(t, ast.Name) and t.id in CONTRACT_NAMES]
+    assert not bad, "\n".join(bad)
+
+
+def test_contract_mirrors_the_symbol_array_message():
+    from tactile_sl_decoder import contract
+    msg = pytest.importorskip("tactile_sl_msgs.msg")
+    assert contract.LABEL_UNKNOWN == msg.SymbolArray.LABEL_UNKNOWN
+    assert contract.CELL_UNKNOWN == msg.SymbolArray.CELL_UNKNOWN

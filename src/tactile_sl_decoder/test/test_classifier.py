@@ -7,13 +7,13 @@ from tactile_sl_decoder.classify.classifier import (
     DEFAULT_THRESHOLD,
     FORMAT,
     FORMAT_VERSION,
-    LABEL_UNKNOWN,
     Classifier,
     ClassifierError,
     FastLeNet,
     default_weights_path,
 )
 from tactile_sl_decoder.classify.model import ARCH, GlyphNet, standardise
+from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.tooling.synth_glyphs import synth_image
 from tactile_sl_decoder.tooling.training import label_detections, save_blob

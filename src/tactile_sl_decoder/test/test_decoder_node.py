@@ -5,7 +5,6 @@ ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; the test publishes stereo frames from a
 and listens for point clouds.
 """
 import os
-import pathlib
 import subprocess
 import threading
 import time
@@ -13,7 +12,8 @@ import time
 import numpy as np
 import pytest
 
-REPO = pathlib.Path(__file__).resolve().parents[3]
+from ros_harness import REPO
+
 EXE = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder" / "decoder"
 BAG = REPO / "bags" / "sphere_deep_small.mcap"
 

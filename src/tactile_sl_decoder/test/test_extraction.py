@@ -5,8 +5,8 @@ import pytest
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.extract.extraction import (
-    PATCH_SIZE,
     Detections,
     ExtractionParams,
     estimate_spacing,

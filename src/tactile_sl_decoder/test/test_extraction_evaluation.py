@@ -1,5 +1,4 @@
 """Evaluation figures: matching rules on hand-made cases, projection, and a bundled bag."""
-import pathlib
 
 import numpy as np
 import pytest
@@ -17,7 +16,7 @@ from tactile_sl_decoder.tooling.evaluation import (
     score_image,
 )
 
-REPO = pathlib.Path(__file__).resolve().parents[3]
+from ros_harness import REPO
 
 
 def test_score_image_counts():

@@ -1,12 +1,12 @@
 """Geometric outlier rejection (stereo/outliers.py) and the robustness bags of issue 11."""
-import pathlib
 
 import numpy as np
 import pytest
 
 from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
 
-REPO = pathlib.Path(__file__).resolve().parents[3]
+from ros_harness import REPO
+
 PITCH = 5e-4
 ROWS, COLS = 30, 28
 

@@ -1,6 +1,5 @@
 """StereoPipeline end to end on synthetic geometry, stereo pairing, bag grouping, metrics."""
 import array
-import pathlib
 from types import SimpleNamespace
 
 import cv2
@@ -16,9 +15,9 @@ from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError, glyphs_from_sy
 from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 from tactile_sl_decoder.tooling.e2e_metrics import aggregate, frame_metrics
 
+from ros_harness import REPO
 from small_patterns import make_pattern
 
-REPO = pathlib.Path(__file__).resolve().parents[3]
 ARTWORK = REPO / "src" / "tactile_sl_camera" / "artwork" / "pattern.png.yaml"
 
 

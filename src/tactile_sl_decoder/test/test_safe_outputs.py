@@ -17,7 +17,8 @@ from tactile_sl_decoder.cli import main
 from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
 from tactile_sl_decoder.pattern.fileio import PatternInvalidError
 
-REPO = Path(__file__).resolve().parents[3]
+from ros_harness import REPO
+
 SOURCE_BAG = REPO / "bags" / "edge.mcap"
 IMAGE_TOPICS = ["/tactile/left/image_raw", "/tactile/right/image_raw",
                 "/tactile/left/camera_info", "/tactile/right/camera_info"]

@@ -4,10 +4,9 @@ import types
 import numpy as np
 import pytest
 
+from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.extract.extraction import Detections, extract_symbols
 from tactile_sl_decoder.symbol_array import (
-    CELL_UNKNOWN,
-    LABEL_UNKNOWN,
     SymbolArrayError,
     Symbols,
     fill_message,

@@ -5,14 +5,14 @@ ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; this test process publishes images and
 SymbolArrays and listens for the labelled output.
 """
 import os
-import pathlib
 import subprocess
 import time
 
 import numpy as np
 import pytest
 
-REPO = pathlib.Path(__file__).resolve().parents[3]
+from ros_harness import REPO
+
 LIB = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder"
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]

@@ -1,5 +1,4 @@
 """Force calibration recovers the modulus from known loads; bad input writes nothing."""
-import pathlib
 
 import numpy as np
 import pytest
@@ -17,7 +16,8 @@ from tactile_sl_decoder.touch.force_calibration import (
 from tactile_sl_decoder.touch.reference import nominal_positions
 from tactile_sl_decoder.touch.sensor import SensorConfig, load_sensor
 
-REPO = pathlib.Path(__file__).resolve().parents[3]
+from ros_harness import REPO
+
 BAG = REPO / "bags" / "touch_calibration.mcap"
 LOADS = (0.1, 0.3, 0.6, 1.0, 1.5)        # bags/touch_scenes.yaml, touch_calibration
 

@@ -2,7 +2,6 @@
 and the `tactile-sl evaluate` touch section on a bundled touch bag."""
 import argparse
 import json
-import pathlib
 import shutil
 
 import numpy as np
@@ -24,7 +23,8 @@ from tactile_sl_decoder.tooling.touch_metrics import (
 from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.stage import TouchResult
 
-REPO = pathlib.Path(__file__).resolve().parents[3]
+from ros_harness import REPO
+
 PITCH = 5e-4
 
 

@@ -28,11 +28,11 @@ from typing import Any
 
 import numpy as np
 
-LABEL_UNKNOWN = 255
+from tactile_sl_decoder.contract import LABEL_UNKNOWN, PATCH_SIZE
+
 FORMAT = "tactile_sl_classifier"
 FORMAT_VERSION = 1
 ARCH = "lenet5-18"
-PATCH = 18
 DEFAULT_THRESHOLD = 0.9
 """Minimum softmax probability for a label to be reported; below it the label is 255."""
 
@@ -134,7 +134,8 @@ class FastLeNet:
         w = self._torch
         n = patches.shape[0]
         with torch.inference_mode():
-            x = torch.from_numpy(np.ascontiguousarray(patches)).reshape(n, PATCH * PATCH).float()
+            x = torch.from_numpy(np.ascontiguousarray(patches))
+            x = x.reshape(n, PATCH_SIZE * PATCH_SIZE).float()
             # per-patch standardisation (x - m) / s is applied after conv1 and pooling: it is
             # a per-patch, per-channel affine map with positive scale, so it commutes with max
             mean = x.mean(dim=1)
@@ -142,9 +143,9 @@ class FastLeNet:
             inv = 1.0 / (var.clamp_min(0.0).sqrt() + 1.0)
             # the two column blocks' inputs, laid out so that the 5 input rows of one output
             # row are consecutive values
-            x = x.view(n, PATCH, PATCH)
-            fa = x[:, :, 0:12].contiguous().view(n, PATCH * 12)
-            fb = x[:, :, 8:18].contiguous().view(n, PATCH * 10)
+            x = x.view(n, PATCH_SIZE, PATCH_SIZE)
+            fa = x[:, :, 0:12].contiguous().view(n, PATCH_SIZE * 12)
+            fb = x[:, :, 8:18].contiguous().view(n, PATCH_SIZE * 10)
             # one pooled row at a time, in two (N, 84) buffers that stay in cache: the even
             # and the odd conv1 row, their maximum, then the maximum of column pairs
             even = torch.empty((n, 84))
@@ -260,8 +261,8 @@ def _to_numpy(value: Any) -> np.ndarray:
 
 def _check_patches(patches: np.ndarray) -> np.ndarray:
     patches = np.asarray(patches)
-    if patches.ndim != 3 or patches.shape[1:] != (PATCH, PATCH):
-        raise ValueError(f"patches must be (N, {PATCH}, {PATCH}), got {patches.shape}")
+    if patches.ndim != 3 or patches.shape[1:] != (PATCH_SIZE, PATCH_SIZE):
+        raise ValueError(f"patches must be (N, {PATCH_SIZE}, {PATCH_SIZE}), got {patches.shape}")
     if patches.dtype != np.uint8:
         patches = np.clip(patches, 0, 255).astype(np.uint8)
     return patches

@@ -12,7 +12,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-PATCH = 18
+from tactile_sl_decoder.contract import PATCH_SIZE
+
 ARCH = "lenet5-18"
 """Architecture tag stored with the weights; a file with another tag is refused."""
 
@@ -42,4 +43,4 @@ def standardise(patches: torch.Tensor) -> torch.Tensor:
     x = patches.reshape(patches.shape[0], -1).float()
     x = x - x.mean(dim=1, keepdim=True)
     x = x / (x.std(dim=1, unbiased=False, keepdim=True) + 1.0)
-    return x.reshape(-1, 1, PATCH, PATCH)
+    return x.reshape(-1, 1, PATCH_SIZE, PATCH_SIZE)

@@ -32,10 +32,9 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.decode.grid import Grid, window_indices
 
-LABEL_UNKNOWN = 255
-CELL_UNKNOWN = -1
 DIRECT_TABLE_MAX = 1 << 22   # code spaces up to this size are looked up by direct address
 
 

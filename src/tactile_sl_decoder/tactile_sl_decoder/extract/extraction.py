@@ -24,8 +24,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-PATCH_SIZE = 18
-"""Side of a glyph patch in pixels; the classifier's input size."""
+from tactile_sl_decoder.contract import PATCH_SIZE
 
 _REMAP_MAX_ROWS = 32000  # cv2.remap wants maps smaller than SHRT_MAX rows
 _MOMENT_BLOCK = 256  # patches per product in patch_centroid_offset

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from tactile_sl_decoder.contract import LABEL_UNKNOWN
+
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
 
@@ -164,7 +166,7 @@ class DecoderDiagnostics:
             if n:
                 label = np.asarray(g.label)
                 p.labelled += n
-                p.unknown += int(np.count_nonzero(label == 255))
+                p.unknown += int(np.count_nonzero(label == LABEL_UNKNOWN))
                 p.confidence_sum += float(np.sum(np.asarray(g.confidence, np.float64)))
         if min(found) > 0:
             p.coverage.append(points / min(found))

@@ -15,7 +15,8 @@ from rclpy.node import Node
 
 from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_camera.nodes.runner import run_node
-from tactile_sl_decoder.classify.classifier import PATCH, Classifier
+from tactile_sl_decoder.classify.classifier import Classifier
+from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.symbol_array import SymbolArrayError, fill_message, from_message
 from tactile_sl_msgs.msg import SymbolArray
 
@@ -67,9 +68,9 @@ class SymbolClassifierNode(Node):
             self.get_logger().warning("skipping SymbolArray without patches (set the "
                                       "extractor's publish_patches)", throttle_duration_sec=5.0)
             return
-        if sym.patches is not None and sym.patches.shape[1] != PATCH:
+        if sym.patches is not None and sym.patches.shape[1] != PATCH_SIZE:
             self.get_logger().warning(f"skipping SymbolArray with {sym.patches.shape[1]} px "
-                                      f"patches; the network takes {PATCH} px",
+                                      f"patches; the network takes {PATCH_SIZE} px",
                                       throttle_duration_sec=5.0)
             return
         start = time.perf_counter()

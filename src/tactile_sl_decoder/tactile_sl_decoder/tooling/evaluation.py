@@ -29,9 +29,8 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.extract.extraction import ExtractionParams, extract_symbols
-
-LABEL_UNKNOWN = 255
 
 
 @dataclass
