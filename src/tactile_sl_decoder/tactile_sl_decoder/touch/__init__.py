@@ -1,7 +1,8 @@
 """Touch stage: displacement, traction, wrench and contact from decoded points (no rclpy).
 
-points (left optical frame) -> :mod:`.reference` (untouched state, pad pose) ->
-:mod:`.displacement` (per-cell 3-D displacement in the pad frame) -> :mod:`.traction`
-(linear-elastic inversion) -> :mod:`.contact` (contact state, depth map).
-:class:`.stage.TouchStage` composes them for the decoder node and ``tactile-sl replay``.
+Stage 5, points -> touch. points (left optical frame) -> :mod:`.reference` (untouched
+state, pad pose; per-cell 3-D displacement in the pad frame is taken against it in
+:mod:`.stage`) -> :mod:`.traction` (linear-elastic inversion) -> :mod:`.contact` (contact
+state, depth map). :class:`.stage.TouchStage` composes them for the decoder node and
+``tactile-sl replay``; :mod:`.messages` turns its results into message dicts.
 """
