@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
+from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN, PATCH_SIZE
 from tactile_sl_decoder.extract.extraction import Detections
 
 
@@ -54,7 +54,9 @@ class Symbols:
 
     def to_detections(self) -> Detections:
         """Back to the extraction dataclass (patches empty if none were carried)."""
-        patches = self.patches if self.patches is not None else np.zeros((0, 18, 18), np.uint8)
+        patches = self.patches
+        if patches is None:
+            patches = np.zeros((0, PATCH_SIZE, PATCH_SIZE), np.uint8)
         return Detections(self.u, self.v, self.area, self.spacing_px, patches)
 
 

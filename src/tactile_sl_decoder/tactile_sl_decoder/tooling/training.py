@@ -25,6 +25,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.classify.classifier import ARCH, FORMAT, FORMAT_VERSION
+from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.extract.extraction import ExtractionParams, extract_symbols
 
 DEFAULT_PRIMITIVES = ("line", "circle", "triangle")
@@ -68,7 +69,7 @@ class PatchSet:
     def concat(sets: list[PatchSet]) -> PatchSet:
         """One set from many (empty list -> empty set)."""
         if not sets:
-            return PatchSet(np.zeros((0, 18, 18), np.uint8), np.zeros(0, np.uint8))
+            return PatchSet(np.zeros((0, PATCH_SIZE, PATCH_SIZE), np.uint8), np.zeros(0, np.uint8))
         return PatchSet(np.concatenate([s.patches for s in sets]),
                         np.concatenate([s.labels for s in sets]),
                         np.concatenate([s.frame for s in sets]))
