@@ -45,6 +45,7 @@ from tactile_sl_decoder.nodes.diagnostics_publisher import DiagnosticsPublisher
 from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
 from tactile_sl_decoder.nodes.touch_outputs import TouchOutputs
 from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline, StereoResult
+from tactile_sl_decoder.symbol_array import Symbols, fill_message
 
 try:
     from tactile_sl_msgs.msg import SymbolArray
@@ -421,29 +422,16 @@ def make_cloud(result: StereoResult, stamp: tuple[int, int], frame_id: str) -> P
     return msg
 
 
-def _arr(typecode: str, values: np.ndarray, dtype: Any) -> array.array:
-    return array.array(typecode, np.ascontiguousarray(values, dtype=dtype).tobytes())
-
-
 def make_symbol_array(g: Glyphs, header: Any, patches: bool = False) -> Any:
-    """SymbolArray (rclpy) of labelled + decoded glyphs, with the source image's header."""
-    msg = SymbolArray()
-    msg.header = header
-    msg.image_width, msg.image_height = int(g.image_width), int(g.image_height)
-    msg.spacing_px = float(g.spacing_px)
-    msg.u = _arr("f", g.u, np.float32)
-    msg.v = _arr("f", g.v, np.float32)
-    msg.area = _arr("f", g.area, np.float32)
-    msg.label = _arr("B", g.label, np.uint8)
-    msg.confidence = _arr("f", g.confidence, np.float32)
-    msg.row = _arr("i", g.row, np.int32)
-    msg.col = _arr("i", g.col, np.int32)
-    if patches and g.patches is not None and len(g):
-        msg.patch_size = int(g.patches.shape[1])
-        msg.patches = _arr("B", g.patches, np.uint8)
-    else:
-        msg.patch_size = 0
-    return msg
+    """SymbolArray (rclpy) of labelled + decoded glyphs, with the source image's header.
+
+    Filled by :func:`~tactile_sl_decoder.symbol_array.fill_message`, the one SymbolArray
+    builder the stage nodes use too.
+    """
+    sym = Symbols(g.u, g.v, g.area, g.label, g.confidence, g.row, g.col, float(g.spacing_px),
+                  g.patches if patches and g.patches is not None and len(g) else None,
+                  int(g.image_width), int(g.image_height))
+    return fill_message(SymbolArray(), sym, header)
 
 
 def main(args: list[str] | None = None) -> None:
