@@ -225,9 +225,12 @@ def test_clouds_reach_another_computer_only_with_the_robot_profile(pair, domain_
           f"{np.median(latency_ms):.1f} ms, p99 {np.percentile(latency_ms, 99):.1f} ms, "
           f"max {latency_ms.max():.1f} ms; veth into b: {robot['veth_rx_bytes']} bytes for "
           f"{cloud_bytes} bytes of cloud data; {t_robot:.1f} s")
-    # Every cloud the decoder published (seen by the listener next to it) crossed the link.
-    assert sorted(robot["stamp_ns"]) == sorted(robot["local"]["stamp_ns"]), (
-        f"{received} clouds in b, {published} in a\n" + logs)
+    # Every cloud the listener next to the decoder saw also crossed the link (that listener
+    # may itself join late or lose a reliable sample on a loaded machine, so b may hold more).
+    missing = set(robot["local"]["stamp_ns"].tolist()) - set(robot["stamp_ns"].tolist())
+    assert not missing, (f"{len(missing)} of the {published} clouds seen in a never reached "
+                         f"b ({received} did)\n" + logs)
+    assert received >= 5, f"only {received} clouds crossed the veth link\n" + logs
     # Over the link, not through shared memory (each namespace has its own /dev/shm).
     assert robot["veth_rx_bytes"] >= cloud_bytes
     # How many of the 30 Hz frames the decoder keeps up with depends on the machine's load
