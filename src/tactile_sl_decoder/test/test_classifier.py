@@ -4,6 +4,7 @@ import pytest
 import torch
 
 from tactile_sl_decoder.classify.classifier import (
+    ARCH,
     DEFAULT_THRESHOLD,
     FORMAT,
     FORMAT_VERSION,
@@ -12,7 +13,7 @@ from tactile_sl_decoder.classify.classifier import (
     FastLeNet,
     default_weights_path,
 )
-from tactile_sl_decoder.classify.model import ARCH, GlyphNet, standardise
+from tactile_sl_decoder.classify.model import GlyphNet, standardise
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.tooling.synth_glyphs import synth_image

@@ -33,6 +33,7 @@ from tactile_sl_decoder.contract import LABEL_UNKNOWN, PATCH_SIZE
 FORMAT = "tactile_sl_classifier"
 FORMAT_VERSION = 1
 ARCH = "lenet5-18"
+"""Architecture tag of :mod:`.model` stored with the weights; another tag is refused."""
 DEFAULT_THRESHOLD = 0.9
 """Minimum softmax probability for a label to be reported; below it the label is 255."""
 

@@ -14,9 +14,6 @@ from torch import nn
 
 from tactile_sl_decoder.contract import PATCH_SIZE
 
-ARCH = "lenet5-18"
-"""Architecture tag stored with the weights; a file with another tag is refused."""
-
 
 class GlyphNet(nn.Module):
     """LeNet-5 as the method describes it, sized for 18x18 patches."""
