@@ -14,13 +14,12 @@ from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, Vector3, WrenchStamped
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Image, PointCloud2
 from std_srvs.srv import Trigger
 
-from tactile_sl_camera.nodes.camera_common import cloud_msg
+from tactile_sl_camera.nodes.camera_common import apply_header, cloud_msg, image_msg
 from tactile_sl_camera.nodes.parameters import declare_qos
 from tactile_sl_decoder.touch.messages import (
     contact_fields,
@@ -45,30 +44,11 @@ except ImportError:
     StaticTransformBroadcaster = None
 
 
-def _float(text: str, low: float, high: float, read_only: bool = False) -> ParameterDescriptor:
-    return ParameterDescriptor(description=text, read_only=read_only, floating_point_range=[
-        FloatingPointRange(from_value=low, to_value=high)])
-
-
-def _int(text: str, low: int, high: int, read_only: bool = False) -> ParameterDescriptor:
-    return ParameterDescriptor(description=text, read_only=read_only, integer_range=[
-        IntegerRange(from_value=low, to_value=high, step=1)])
-
-
-_START_ONLY = " Applies at start only (read-only): the reference is taken with it."
-
-
 def _hysteresis(values: dict[str, Any]) -> str | None:
     on, off = values.get("contact_force_on"), values.get("contact_force_off")
     if on is not None and off is not None and off > on:
         return f"contact_force_off ({off}) must not exceed contact_force_on ({on})"
     return None
-
-
-def _stamp(msg: Any, fields: dict[str, Any]) -> None:
-    msg.header.stamp.sec = fields["header"]["stamp"]["sec"]
-    msg.header.stamp.nanosec = fields["header"]["stamp"]["nanosec"]
-    msg.header.frame_id = fields["header"]["frame_id"]
 
 
 def _vec(cls: Any, d: dict[str, float]) -> Any:
@@ -78,7 +58,7 @@ def _vec(cls: Any, d: dict[str, float]) -> Any:
 def wrench_msg(fields: dict[str, Any]) -> WrenchStamped:
     """WrenchStamped from :func:`~tactile_sl_decoder.touch.messages.wrench_fields`."""
     msg = WrenchStamped()
-    _stamp(msg, fields)
+    apply_header(msg, fields)
     msg.wrench.force = _vec(Vector3, fields["wrench"]["force"])
     msg.wrench.torque = _vec(Vector3, fields["wrench"]["torque"])
     return msg
@@ -87,7 +67,7 @@ def wrench_msg(fields: dict[str, Any]) -> WrenchStamped:
 def contact_msg(fields: dict[str, Any]) -> Any:
     """Contact from :func:`~tactile_sl_decoder.touch.messages.contact_fields`."""
     msg = Contact()
-    _stamp(msg, fields)
+    apply_header(msg, fields)
     for key in ("in_contact", "area", "max_depth", "normal_force", "peak_pressure",
                 "cells_in_contact"):
         setattr(msg, key, fields[key])
@@ -99,20 +79,10 @@ def contact_msg(fields: dict[str, Any]) -> Any:
     return msg
 
 
-def depth_msg(fields: dict[str, Any]) -> Image:
-    """Image from :func:`~tactile_sl_decoder.touch.messages.depth_fields`."""
-    msg = Image()
-    _stamp(msg, fields)
-    for key in ("height", "width", "encoding", "is_bigendian", "step"):
-        setattr(msg, key, fields[key])
-    msg.data = array.array("B", fields["data"])
-    return msg
-
-
 def pose_msg(fields: dict[str, Any]) -> PoseStamped:
     """PoseStamped from :func:`~tactile_sl_decoder.touch.messages.pose_fields`."""
     msg = PoseStamped()
-    _stamp(msg, fields)
+    apply_header(msg, fields)
     msg.pose.position = _vec(Point, fields["pose"]["position"])
     o = fields["pose"]["orientation"]
     msg.pose.orientation.x, msg.pose.orientation.y = o["x"], o["y"]
@@ -127,82 +97,64 @@ class TouchOutputs:
                  out_qos: QoSProfile) -> None:
         self.node = node
         self.shape, self.pitch = shape, pitch
-        d = node.declare_parameter
-        d("touch", True, ParameterDescriptor(
-            description="Publish field, wrench, contact, depth and pad_pose (needs an "
-            "untouched pad at start: the reference)", read_only=True))
-        d("sensor_file", "", ParameterDescriptor(
-            description="Sensor YAML (elastomer, pad frame); empty = the shipped one",
-            read_only=True))
-        d("reference_frames", 1, _int("Decoded frames averaged into the untouched reference "
-                                      "(at start and after each tare)." + _START_ONLY, 1, 1000,
-                                      read_only=True))
-        d("elastomer.youngs_modulus", -1.0, _float(
-            "Pa; overrides the sensor file (< 0 = the file's value)." + _START_ONLY, -1.0, 1e12,
-            read_only=True))
-        d("elastomer.poisson_ratio", -1.0, _float(
-            "Overrides the sensor file (< 0 = the file's value), 0..0.5." + _START_ONLY,
-            -1.0, 0.5, read_only=True))
-        d("elastomer.thickness", -1.0, _float(
-            "m, layer bonded to a rigid window, 0 = half-space; overrides the sensor file "
-            "(< 0 = the file's value)." + _START_ONLY, -1.0, 1.0, read_only=True))
-        d("pad_frame", "", ParameterDescriptor(
-            description="Frame id of the touch outputs; empty = the sensor file's",
-            read_only=True))
+        live = node.params         # the node's one parameter mechanism
+        ref = " The reference is taken with it."
+        enabled = live.declare("touch", True, "Publish field, wrench, contact, depth and "
+                               "pad_pose (needs an untouched pad at start: the reference).",
+                               read_only=True)
+        sensor_file = live.declare("sensor_file", "", "Sensor YAML (elastomer, pad frame); "
+                                   "empty = the shipped one.", read_only=True)
+        reference_frames = live.declare(
+            "reference_frames", 1, "Decoded frames averaged into the untouched reference (at "
+            "start and after each tare)." + ref, (1, 1000), read_only=True)
+        youngs = live.declare("elastomer.youngs_modulus", -1.0, "Pa; overrides the sensor "
+                              "file (< 0 = the file's value)." + ref, (-1.0, 1e12),
+                              read_only=True)
+        poisson = live.declare("elastomer.poisson_ratio", -1.0, "Overrides the sensor file "
+                               "(< 0 = the file's value), 0..0.5." + ref, (-1.0, 0.5),
+                               read_only=True)
+        thickness = live.declare("elastomer.thickness", -1.0, "m, layer bonded to a rigid "
+                                 "window, 0 = half-space; overrides the sensor file (< 0 = "
+                                 "the file's value)." + ref, (-1.0, 1.0), read_only=True)
+        pad_frame = live.declare("pad_frame", "", "Frame id of the touch outputs; empty = "
+                                 "the sensor file's.", read_only=True)
         defaults = TouchParams()
-        live = getattr(node, "params", None)
-        if live is not None:       # the node's one parameter mechanism: applied live
-            live.declare("contact_force_on", defaults.contact.force_on,
-                         "N: in_contact turns on above this normal force", (1e-4, 100.0),
-                         apply=lambda v: self._set("force_on", v))
-            live.declare("contact_force_off", defaults.contact.force_off,
-                         "N: in_contact turns off below this normal force (hysteresis; "
-                         "<= contact_force_on)", (1e-4, 100.0),
-                         apply=lambda v: self._set("force_off", v))
-            live.declare("tare_max_depth", defaults.tare_max_depth,
-                         "m: a tare is refused while the pad is pressed in deeper than this "
-                         "(or in contact)", (1e-7, 0.01),
-                         apply=lambda v: self._set("tare_max_depth", v))
-            live.check_together(_hysteresis)
-        else:
-            d("contact_force_on", defaults.contact.force_on, _float(
-                "N: in_contact turns on above this normal force", 1e-4, 100.0))
-            d("contact_force_off", defaults.contact.force_off, _float(
-                "N: in_contact turns off below this normal force (hysteresis)", 1e-4, 100.0))
-            d("tare_max_depth", defaults.tare_max_depth, _float(
-                "m: a tare is refused while the pad is pressed in deeper than this (or in "
-                "contact)", 1e-7, 0.01))
-        gp = node.get_parameter
-        self.enabled = bool(gp("touch").value)
+        force_on = live.declare("contact_force_on", defaults.contact.force_on,
+                                "N: in_contact turns on above this normal force",
+                                (1e-4, 100.0), apply=lambda v: self._set("force_on", v))
+        force_off = live.declare("contact_force_off", defaults.contact.force_off,
+                                 "N: in_contact turns off below this normal force "
+                                 "(hysteresis; <= contact_force_on)", (1e-4, 100.0),
+                                 apply=lambda v: self._set("force_off", v))
+        tare_max_depth = live.declare(
+            "tare_max_depth", defaults.tare_max_depth, "m: a tare is refused while the pad is "
+            "pressed in deeper than this (or in contact)", (1e-7, 0.01),
+            apply=lambda v: self._set("tare_max_depth", v))
+        live.check_together(_hysteresis)
+        self.enabled = bool(enabled)
         self.announced_waiting = False
         self.tares = 0             # tares accepted (the reference is taken again)
         self.last_tare = ""        # the answer to the last tare request
         if not self.enabled:
             return
 
-        def override(name: str) -> float | None:
-            value = float(gp(name).value)
-            return None if value < 0 else value
+        def override(value: float) -> float | None:
+            return None if float(value) < 0 else float(value)
 
-        sensor = load_sensor(str(gp("sensor_file").value) or None).with_overrides(
-            override("elastomer.youngs_modulus"), override("elastomer.poisson_ratio"),
-            override("elastomer.thickness"), str(gp("pad_frame").value) or None)
-        params = TouchParams(reference_frames=int(gp("reference_frames").value))
-        params.contact.force_on = float(gp("contact_force_on").value)
-        params.contact.force_off = float(gp("contact_force_off").value)
-        params.tare_max_depth = float(gp("tare_max_depth").value)
+        sensor = load_sensor(str(sensor_file) or None).with_overrides(
+            override(youngs), override(poisson), override(thickness), str(pad_frame) or None)
+        params = TouchParams(reference_frames=int(reference_frames))
+        params.contact.force_on = float(force_on)
+        params.contact.force_off = float(force_off)
+        params.tare_max_depth = float(tare_max_depth)
         self.stage = TouchStage(sensor, shape, pitch, mirrored, params)
         self.frame_id = str(getattr(node, "frame_prefix", "")) + sensor.pad_frame
         self.pub_field = node.create_publisher(PointCloud2, "field", out_qos)
         self.pub_wrench = node.create_publisher(WrenchStamped, "wrench", out_qos)
         self.pub_contact = node.create_publisher(Contact, "contact", out_qos)
         self.pub_depth = node.create_publisher(Image, "depth", out_qos)
-        latched = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                             reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        if getattr(node, "params", None) is not None:
-            latched = declare_qos(node.params, "pad_pose", "pad_pose (latched: late joiners "
-                                  "get the pad frame)", 1, "reliable", "transient_local")
+        latched = declare_qos(live, "pad_pose", "pad_pose (latched: late joiners get the pad "
+                              "frame)", 1, "reliable", "transient_local")
         self.pub_pose = node.create_publisher(PoseStamped, "pad_pose", latched)
         self.tf = StaticTransformBroadcaster(node) if StaticTransformBroadcaster else None
         node.create_service(Trigger, "tare", self._on_tare)
@@ -263,11 +215,10 @@ class TouchOutputs:
                 self._announce_reference(stamp, camera_frame)
             return
         f = self.frame_id
-        self.pub_field.publish(cloud_msg(field_fields(result, stamp, f),
-                                         _time(stamp)))
+        self.pub_field.publish(cloud_msg(field_fields(result, stamp, f)))
         self.pub_wrench.publish(wrench_msg(wrench_fields(result, stamp, f)))
         self.pub_contact.publish(contact_msg(contact_fields(result.contact, stamp, f)))
-        self.pub_depth.publish(depth_msg(depth_fields(result.depth, stamp, f)))
+        self.pub_depth.publish(image_msg(depth_fields(result.depth, stamp, f)))
 
     def _announce_reference(self, stamp: tuple[int, int], camera_frame: str) -> None:
         ref = self.stage.reference
@@ -276,7 +227,7 @@ class TouchOutputs:
         self.pub_pose.publish(pose_msg(fields))
         if self.tf is not None:
             t = TransformStamped()
-            _stamp(t, fields)
+            apply_header(t, fields)
             t.child_frame_id = self.frame_id
             p, o = fields["pose"]["position"], fields["pose"]["orientation"]
             t.transform.translation = _vec(Vector3, p)
@@ -287,9 +238,3 @@ class TouchOutputs:
             f"touch: reference of {len(ref.cells)} cells from {ref.frames} frame(s); pad "
             f"frame fit residual {ref.pose.residual_rms * 1e6:.1f} um RMS "
             f"({ref.pose.residual_max * 1e6:.1f} um max)")
-
-
-def _time(stamp: tuple[int, int]) -> Any:
-    from builtin_interfaces.msg import Time
-
-    return Time(sec=int(stamp[0]), nanosec=int(stamp[1]))
