@@ -1,0 +1,48 @@
+"""The points of every bundled bag are byte-identical to those recorded before a refactoring.
+
+``data/points_digests.json`` holds, per bag and frame, the stamp, the point count and the
+SHA-256 of the PointCloud2 data that ``tactile-sl replay`` wrote on the tree before the
+layout change (issue 9; recorded with ``python tools/points_digest.py --write ...`` at commit
+3f1d4a6).  A change that alters any decoded point, even in the last bit, fails here; when a
+change is *meant* to alter points (a better decoder), record the digests again and say so in
+the commit.
+
+Bytes are only comparable on the CPU model the digests were recorded on: numpy and OpenCV
+pick SIMD code paths per CPU, which can move a float's last bit.  On another CPU model the
+test still requires the same frames and the same number of points in each.
+"""
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+from ros_harness import REPO
+
+pytestmark = pytest.mark.slow
+
+DIGESTS = Path(__file__).parent / "data" / "points_digests.json"
+
+
+def _tool():
+    spec = importlib.util.spec_from_file_location("points_digest",
+                                                  REPO / "tools" / "points_digest.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_points_of_every_bag_are_unchanged(tmp_path):
+    tool = _tool()
+    recorded = json.loads(DIGESTS.read_text())
+    bags = sorted((REPO / "bags").glob("*.mcap"))
+    assert {b.name for b in bags} == set(recorded["bags"]), "bags added or removed: record again"
+    same_cpu = tool.cpu_model() == recorded["cpu"]
+    for bag in bags:
+        now = tool.replay_digests(bag, tmp_path)
+        before = recorded["bags"][bag.name]
+        assert [f[:2] for f in now] == [f[:2] for f in before], (
+            f"{bag.name}: frames or point counts changed")
+        if same_cpu:
+            changed = [i for i, (a, b) in enumerate(zip(now, before)) if a[2] != b[2]]
+            assert not changed, f"{bag.name}: points of frames {changed} are not byte-identical"
