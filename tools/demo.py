@@ -37,8 +37,8 @@ from tactile_sl_camera.bag_io import stamp_to_ns
 from tactile_sl_camera.clouds import FIELD_FORCE_DTYPE, cloud_to_arrays
 from tactile_sl_camera.images import to_gray
 from tactile_sl_decoder.frames import bag_frames
-from tactile_sl_decoder.glyphs import glyphs_from_symbol_array
 from tactile_sl_decoder.pipeline import PatternSpec
+from tactile_sl_decoder.symbol_array import from_message
 from tactile_sl_decoder.tooling.e2e_metrics import (
     aggregate,
     format_table,
@@ -199,7 +199,7 @@ def main() -> int:
     cv2.imwrite(str(args.out / "cloud.png"), render_cloud(cloud))
     if stamp in listener.symbols:
         overlay = render_overlay(to_gray(frame.left_image),
-                                 glyphs_from_symbol_array(listener.symbols[stamp]))
+                                 from_message(listener.symbols[stamp]))
         cv2.imwrite(str(args.out / "overlay_left.png"), overlay)
     depth = depths[stamp]
     where = args.out.relative_to(REPO) if args.out.is_relative_to(REPO) else args.out

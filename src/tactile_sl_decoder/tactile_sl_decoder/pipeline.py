@@ -144,8 +144,7 @@ class StereoPipeline:
         """Glyph candidates (unlabelled) of both images."""
         def run(gray: np.ndarray) -> Glyphs:
             det = self._extract(gray)
-            return Glyphs(det.u, det.v, None, None, float(det.spacing_px), gray.shape[1],
-                          gray.shape[0], det.area, det.patches)
+            return Glyphs.from_detections(det, gray.shape)
         return self._map(run, left_gray, right_gray)
 
     def _extract_classify(self, job: tuple[np.ndarray, Any]
@@ -160,8 +159,7 @@ class StereoPipeline:
         gray, cam = job
         t0 = time.perf_counter()
         det = self._extract(gray)
-        g = Glyphs(det.u, det.v, None, None, float(det.spacing_px), gray.shape[1],
-                   gray.shape[0], det.area, det.patches)
+        g = Glyphs.from_detections(det, gray.shape)
         t1 = time.perf_counter()
         g.neighbours = self._neighbours(g)
         g.rectified = StereoRig.rectify(cam, np.column_stack([g.u, g.v]).astype(np.float64))

@@ -11,8 +11,9 @@ from tactile_sl_camera.camera_info import CameraCalibration, camera_info_fields
 from tactile_sl_camera.clouds import cloud_fields, cloud_to_arrays, pack_points
 from tactile_sl_camera.images import image_fields
 from tactile_sl_decoder.frames import StereoSync, bag_frames
-from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError, glyphs_from_symbol_array
+from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+from tactile_sl_decoder.symbol_array import from_message
 from tactile_sl_decoder.tooling.e2e_metrics import aggregate, frame_metrics
 
 from ros_harness import REPO
@@ -176,12 +177,16 @@ def test_symbol_array_messages_convert_and_are_checked():
         area=array.array("f", []), label=bytes([0, 255]), confidence=array.array("f", [0.9, 0]),
         row=array.array("i", [-1, -1]), col=array.array("i", [-1, -1]), spacing_px=18.0,
         image_width=640, image_height=480, patch_size=0, patches=b"")
-    g = glyphs_from_symbol_array(msg)
+    g = from_message(msg)
     assert g.u.tolist() == [1.0, 2.0] and g.label.tolist() == [0, 255]
     assert g.area.tolist() == [0.0, 0.0] and g.image_width == 640
+    msg.patch_size, msg.patches = 18, bytes(2 * 18 * 17)     # wrong-size patches: refused
+    with pytest.raises(PipelineInputError, match="patch bytes"):
+        from_message(msg)
+    msg.patch_size, msg.patches = 0, b""
     msg.v = array.array("f", [3.0])
-    with pytest.raises(PipelineInputError, match="'v'"):
-        glyphs_from_symbol_array(msg)
+    with pytest.raises(PipelineInputError, match="field v"):
+        from_message(msg)
 
 
 def test_bag_frames_group_by_exact_stamp_in_any_order(tmp_path, scene):

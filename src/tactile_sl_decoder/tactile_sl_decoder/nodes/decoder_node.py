@@ -39,13 +39,13 @@ from tactile_sl_camera.nodes.parameters import (
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.checks import check_classifier, check_threshold, load_pattern_spec
 from tactile_sl_decoder.frames import StereoSync
-from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError, glyphs_from_symbol_array
+from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.nodes.diagnostics import DecoderDiagnostics, DiagnosticLimits, Status
 from tactile_sl_decoder.nodes.diagnostics_publisher import DiagnosticsPublisher
 from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
 from tactile_sl_decoder.nodes.touch_outputs import TouchOutputs
 from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline, StereoResult
-from tactile_sl_decoder.symbol_array import Symbols, fill_message
+from tactile_sl_decoder.symbol_array import fill_message, from_message
 
 try:
     from tactile_sl_msgs.msg import SymbolArray
@@ -312,7 +312,7 @@ class DecoderNode(Node):
                                                self.info["left"], self.info["right"])
             else:
                 result = self.pipeline.process_symbols(
-                    glyphs_from_symbol_array(left_msg), glyphs_from_symbol_array(right_msg),
+                    from_message(left_msg), from_message(right_msg),
                     self.info["left"], self.info["right"])
         except (PipelineInputError, ImageFormatError, ValueError) as exc:
             self.stats["skipped"] += 1
@@ -423,15 +423,8 @@ def make_cloud(result: StereoResult, stamp: tuple[int, int], frame_id: str) -> P
 
 
 def make_symbol_array(g: Glyphs, header: Any, patches: bool = False) -> Any:
-    """SymbolArray (rclpy) of labelled + decoded glyphs, with the source image's header.
-
-    Filled by :func:`~tactile_sl_decoder.symbol_array.fill_message`, the one SymbolArray
-    builder the stage nodes use too.
-    """
-    sym = Symbols(g.u, g.v, g.area, g.label, g.confidence, g.row, g.col, float(g.spacing_px),
-                  g.patches if patches and g.patches is not None and len(g) else None,
-                  int(g.image_width), int(g.image_height))
-    return fill_message(SymbolArray(), sym, header)
+    """SymbolArray (rclpy) of labelled + decoded glyphs, with the source image's header."""
+    return fill_message(SymbolArray(), g, header, with_patches=patches)
 
 
 def main(args: list[str] | None = None) -> None:

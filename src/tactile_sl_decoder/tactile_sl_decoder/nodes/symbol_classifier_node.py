@@ -60,27 +60,26 @@ class SymbolClassifierNode(Node):
     def on_symbols(self, msg: SymbolArray) -> None:
         """Classify and republish; unusable messages are logged and skipped."""
         try:
-            sym = from_message(msg)
+            glyphs = from_message(msg)
         except SymbolArrayError as exc:
             self.get_logger().warning(f"skipping SymbolArray: {exc}", throttle_duration_sec=5.0)
             return
-        if len(sym) and sym.patches is None:
+        if len(glyphs) and glyphs.patches is None:
             self.get_logger().warning("skipping SymbolArray without patches (set the "
                                       "extractor's publish_patches)", throttle_duration_sec=5.0)
             return
-        if sym.patches is not None and sym.patches.shape[1] != PATCH_SIZE:
-            self.get_logger().warning(f"skipping SymbolArray with {sym.patches.shape[1]} px "
+        if glyphs.patches is not None and glyphs.patches.shape[1] != PATCH_SIZE:
+            self.get_logger().warning(f"skipping SymbolArray with {glyphs.patches.shape[1]} px "
                                       f"patches; the network takes {PATCH_SIZE} px",
                                       throttle_duration_sec=5.0)
             return
         start = time.perf_counter()
-        if len(sym):
-            sym.label, sym.confidence = self.classifier.predict(sym.patches)
-        if not self.keep_patches:
-            sym.patches = None
-        self.pub.publish(fill_message(SymbolArray(), sym, header=msg.header))
-        self.get_logger().debug(f"{len(sym)} glyphs in {1000 * (time.perf_counter() - start):.2f}"
-                                " ms")
+        if len(glyphs):
+            glyphs.label, glyphs.confidence = self.classifier.predict(glyphs.patches)
+        self.pub.publish(fill_message(SymbolArray(), glyphs, header=msg.header,
+                                      with_patches=self.keep_patches))
+        self.get_logger().debug(f"{len(glyphs)} glyphs in "
+                                f"{1000 * (time.perf_counter() - start):.2f} ms")
 
 
 def main(args: list[str] | None = None) -> None:

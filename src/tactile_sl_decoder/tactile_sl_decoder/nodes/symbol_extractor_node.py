@@ -21,8 +21,9 @@ from tactile_sl_camera.images import ImageFormatError, to_gray
 from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.extract.extraction import extract_symbols
+from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
-from tactile_sl_decoder.symbol_array import Symbols, fill_message
+from tactile_sl_decoder.symbol_array import fill_message
 from tactile_sl_msgs.msg import SymbolArray
 
 
@@ -63,8 +64,8 @@ class SymbolExtractorNode(Node):
         except ValueError as exc:
             self.get_logger().warning(f"skipping image: {exc}", throttle_duration_sec=5.0)
             return
-        sym = Symbols.from_detections(det, gray.shape, with_patches=self.publish_patches)
-        out = fill_message(SymbolArray(), sym, header=msg.header)
+        out = fill_message(SymbolArray(), Glyphs.from_detections(det, gray.shape),
+                           header=msg.header, with_patches=self.publish_patches)
         self.pub.publish(out)
         self.busy += time.perf_counter() - start
         self.count += 1

@@ -294,8 +294,8 @@ UNKNOWN_COLOUR_BGR = (160, 160, 160)
 def render_overlay(gray: np.ndarray, glyphs: Any, label_every: int = 4) -> np.ndarray:
     """BGR picture of one image with its glyphs coloured by class and cells annotated.
 
-    ``glyphs`` has ``u, v, label, row, col`` arrays (a pipeline ``Glyphs`` or the result of
-    ``glyphs_from_symbol_array`` on a ``symbols_decoded`` message). Decoded glyphs get a
+    ``glyphs`` has ``u, v, label, row, col`` arrays (a pipeline ``Glyphs``, or
+    ``symbol_array.from_message`` of a ``symbols_decoded`` message). Decoded glyphs get a
     filled dot, undecoded ones a ring; every cell whose row and column are multiples of
     ``label_every`` is written as ``row,col``.
     """
