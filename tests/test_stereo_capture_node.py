@@ -21,7 +21,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2  # noqa: E402
 
 from tactile_sl_camera.camera_info import save_camera_info_yaml  # noqa: E402
 from tactile_sl_camera.clouds import cloud_to_arrays  # noqa: E402
-from tactile_sl_camera.sim.optics import StereoRig  # noqa: E402
+from tactile_sl_camera.sim.optics import SimulatedCameraPair  # noqa: E402
 
 DOMAIN = 60 + (os.getpid() * 7) % 41
 
@@ -95,7 +95,7 @@ def _write_video(path, values, size=(160, 120)):
 def test_stereo_camera_node_from_video_files(tmp_path):
     left, right = tmp_path / "left.avi", tmp_path / "right.avi"
     _write_video(left, [40] * 50)
-    rig = StereoRig()
+    rig = SimulatedCameraPair()
     save_camera_info_yaml(tmp_path / "left.yaml", rig.left_info)
     save_camera_info_yaml(tmp_path / "right.yaml", rig.right_info)
     log = tmp_path / "node.log"

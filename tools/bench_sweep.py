@@ -160,19 +160,19 @@ class Sweep:
         self._renderers: dict[float, Any] = {}
 
     def renderer(self, spacing: float) -> Any:
-        from tactile_sl_camera.sim.optics import RigParams, StereoRig
+        from tactile_sl_camera.sim.optics import RigParams, SimulatedCameraPair
         from tactile_sl_camera.sim.render import Renderer
 
         if spacing not in self._renderers:
             f = spacing / 18.0
             rig = RigParams(focal=(BASE_FOCAL[0] * f, BASE_FOCAL[1] * f))
-            self._renderers[spacing] = Renderer(self.artwork, StereoRig(rig))
+            self._renderers[spacing] = Renderer(self.artwork, SimulatedCameraPair(rig))
         return self._renderers[spacing]
 
     def run_row(self, names: list[str], level: int) -> RowFigures:
         from tactile_sl_camera.clouds import pack_points
         from tactile_sl_camera.sim.render import Nuisances
-        from tactile_sl_decoder.stereo.stereo import StereoRig as DecoderRig
+        from tactile_sl_decoder.stereo.stereo import StereoRig
         from tactile_sl_decoder.tooling.e2e_metrics import frame_metrics
 
         out = RowFigures()
@@ -183,7 +183,7 @@ class Sweep:
             renderer = self.renderer(spacing)
             seed = self.seed + 101 * level + frame
             f = renderer.render(frame_contacts(frame), nz, seed=seed, frame_index=frame)
-            rig = DecoderRig(renderer.rig.left_info, renderer.rig.right_info)
+            rig = StereoRig(renderer.rig.left_info, renderer.rig.right_info)
             t0 = time.perf_counter()
             res = self.pipeline.process(f.left, f.right, rig, rig)
             out.ms.append(1e3 * (time.perf_counter() - t0))

@@ -13,7 +13,7 @@ from tactile_sl_camera.camera_info import (
     save_camera_info_yaml,
     stereo_baseline,
 )
-from tactile_sl_camera.sim.optics import StereoRig
+from tactile_sl_camera.sim.optics import SimulatedCameraPair
 
 ROS_YAML = """image_width: 640
 image_height: 480
@@ -55,7 +55,7 @@ def test_load_ros_camera_calibration_yaml(tmp_path):
 
 
 def test_round_trip_through_yaml_and_messages(tmp_path):
-    rig = StereoRig()
+    rig = SimulatedCameraPair()
     for calib in (rig.left_info, rig.right_info):
         path = save_camera_info_yaml(tmp_path / "c.yaml", calib)
         back = load_camera_info_yaml(path)
@@ -88,13 +88,13 @@ def test_uncalibrated_or_degenerate_messages_are_rejected():
                               (0, 0), "cam")
     with pytest.raises(CameraInfoError, match="not calibrated"):
         calibration_from_msg(zero)
-    good = camera_info_fields(StereoRig().left_info, (0, 0), "cam")
+    good = camera_info_fields(SimulatedCameraPair().left_info, (0, 0), "cam")
     bad = dict(good, r=[2.0] * 9)
     with pytest.raises(CameraInfoError, match="rotation"):
         calibration_from_msg(bad)
     with pytest.raises(CameraInfoError, match="lacks field"):
         calibration_from_msg({"width": 1})
-    left = StereoRig().left_info
+    left = SimulatedCameraPair().left_info
     with pytest.raises(CameraInfoError, match="no baseline"):
         stereo_baseline(left, left)
     with pytest.raises(CameraInfoError, match="no such"):

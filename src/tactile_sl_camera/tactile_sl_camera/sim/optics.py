@@ -97,8 +97,12 @@ class RigParams:
         return cls(**{k: tup(v) for k, v in doc.items()})
 
 
-class StereoRig:
-    """The left/right cameras and their ROS stereo calibration."""
+class SimulatedCameraPair:
+    """The simulator's two physical cameras, and the stereo calibration they produce.
+
+    Renders through :class:`Camera`; ``left_info``/``right_info`` are the exact CameraInfo a
+    calibration of these cameras gives (what the decoder's ``stereo.StereoRig`` consumes).
+    """
 
     def __init__(self, params: RigParams | None = None) -> None:
         self.params = p = params or RigParams()

@@ -25,7 +25,7 @@ import numpy as np
 from .artwork import Artwork
 from .contact import Contact, FieldGrid, PadParams
 from .loads import LoadContact, TouchTruth, is_load, touch_truth
-from .optics import Camera, StereoRig
+from .optics import Camera, SimulatedCameraPair
 
 
 @dataclass
@@ -272,11 +272,11 @@ def _object_pattern(kind: str, shape: tuple[int, int], scale_px: float,
 class Renderer:
     """Render stereo frames of the pad under contacts; deterministic for a seed."""
 
-    def __init__(self, artwork: Artwork, rig: StereoRig | None = None,
+    def __init__(self, artwork: Artwork, rig: SimulatedCameraPair | None = None,
                  pad: PadParams | None = None, supersample: int = 2, iterations: int = 8,
                  mirrored: bool = False, grid: dict[str, float] | None = None) -> None:
         self.artwork = artwork
-        self.rig = rig or StereoRig()
+        self.rig = rig or SimulatedCameraPair()
         self.pad = pad or PadParams()
         self.ss = int(supersample)
         if self.ss < 1:

@@ -20,7 +20,7 @@ from ..images import image_fields
 from .artwork import load_artwork
 from .contact import Contact
 from .loads import TouchTruth
-from .optics import StereoRig
+from .optics import SimulatedCameraPair
 from .render import Nuisances, Renderer, StereoFrame
 from .scenes import Scene
 
@@ -54,7 +54,7 @@ class RendererCache:
         key = scene.renderer_key() + (str(self.artwork),)
         if key not in self._renderers:
             art = load_artwork(scene.artwork or self.artwork)
-            self._renderers[key] = Renderer(art, StereoRig(scene.rig), scene.pad,
+            self._renderers[key] = Renderer(art, SimulatedCameraPair(scene.rig), scene.pad,
                                             supersample=scene.supersample,
                                             mirrored=scene.mirrored)
         return self._renderers[key]
