@@ -11,7 +11,7 @@ import yaml
 
 from tactile_sl_decoder.pattern import Constraints, Pattern, load_default_pattern
 from tactile_sl_decoder.pattern.artwork import render_png, render_svg
-from tactile_sl_decoder.pattern.glyphs import GLYPHS, INK_AREA, default_primitives
+from tactile_sl_decoder.pattern.shapes import GLYPHS, INK_AREA, default_primitives
 
 CAMERA_ARTWORK = (Path(__file__).resolve().parents[2] / "tactile_sl_camera" / "artwork"
                   / "pattern.png")

@@ -19,7 +19,7 @@ import numpy as np
 import yaml
 
 from .fileio import Pattern
-from .glyphs import INK_AREA, Glyph, glyph
+from .shapes import INK_AREA, Glyph, glyph
 
 MM_PER_INCH = 25.4
 DEFAULT_MARGIN_PITCH = 1.5

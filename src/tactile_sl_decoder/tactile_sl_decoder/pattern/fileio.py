@@ -14,7 +14,7 @@ import numpy as np
 import yaml
 
 from .constraints import Constraints
-from .glyphs import default_primitives
+from .shapes import default_primitives
 
 FORMAT_VERSION = 1
 DEFAULT_PITCH_M = 0.0005

@@ -1,7 +1,7 @@
 """Synthetic glyph-grid images with exact ground truth, for tests, benchmarks and augmentation.
 
 A lightweight 2-D stand-in for the ray-cast simulator: the shipped glyph shapes
-(:mod:`tactile_sl_decoder.pattern.glyphs`) drawn on a grid seen through a smooth warp
+(:mod:`tactile_sl_decoder.pattern.shapes`) drawn on a grid seen through a smooth warp
 (scale, shear, rotation and a radial bulge like an indentation), then blurred, unevenly lit
 and noisy. The warp maps pixels to the artwork plane, so rendering is one vectorised pass;
 ground-truth pixel centres come from inverting it by fixed-point iteration.
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tactile_sl_decoder.pattern.glyphs import glyph
+from tactile_sl_decoder.pattern.shapes import glyph
 
 DEFAULT_PRIMITIVES = ("line", "circle", "triangle")
 

@@ -100,7 +100,7 @@ def artwork_values(art: Any, primitives: tuple[str, ...] | list[str]) -> np.ndar
     whatever the state of the pattern file; each cell's ink is compared with every
     primitive's shape (pad-plane pitch units) and the best normalised match wins.
     """
-    from tactile_sl_decoder.pattern.glyphs import glyph
+    from tactile_sl_decoder.pattern.shapes import glyph
 
     size = int(round(art.pitch_px))
     g = (np.arange(size) - (size - 1) / 2.0) / art.pitch_px
