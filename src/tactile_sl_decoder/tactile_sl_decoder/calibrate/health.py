@@ -25,8 +25,8 @@ re-estimates the stereo extrinsics from the same frames with the intrinsics fixe
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -142,7 +142,7 @@ def pad_rest_positions(target: PatternTarget, row: np.ndarray, col: np.ndarray) 
 
 
 def _as_views(x: Glyphs | CameraView | Sequence[Glyphs | CameraView]) -> list[CameraView]:
-    items = x if isinstance(x, (list, tuple)) else [x]
+    items = x if isinstance(x, Sequence) else [x]
     return [v if isinstance(v, CameraView) else CameraView.from_glyphs(v) for v in items]
 
 

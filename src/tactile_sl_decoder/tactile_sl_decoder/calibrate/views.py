@@ -105,9 +105,7 @@ class ViewDecoder:
             raise ValueError(f"view {name}: left and right images differ in size "
                              f"({left.shape[1]}x{left.shape[0]} vs "
                              f"{right.shape[1]}x{right.shape[0]})")
-        gl, gr = self.pipeline.extract_pair(left, right)
-        self.pipeline.classify_pair(gl, gr)
-        self.pipeline.decode_pair(gl, gr)
+        gl, gr = self.decode_glyphs(left, right)
         return StereoView(name, CameraView.from_glyphs(gl), CameraView.from_glyphs(gr),
                           (int(left.shape[1]), int(left.shape[0])))
 
