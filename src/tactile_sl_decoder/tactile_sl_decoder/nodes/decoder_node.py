@@ -18,16 +18,16 @@ running.  Parameters: see ``config/decoder.yaml`` and ``docs/decoder.md``.
 """
 from __future__ import annotations
 
-import array
 import time
 from typing import Any
 
 import numpy as np
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2, PointField
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from tactile_sl_camera.clouds import cloud_fields
 from tactile_sl_camera.images import ImageFormatError, to_gray
+from tactile_sl_camera.nodes.camera_common import cloud_msg
 from tactile_sl_camera.nodes.parameters import (
     FRAME_PREFIX_DOC,
     LiveParameters,
@@ -329,7 +329,7 @@ class DecoderNode(Node):
                       f"check pattern_file (is it the printed pattern?) and mirrored")
         if len(result.points) or self.publish_empty:
             frame_id = result.frame_id or str(left_msg.header.frame_id)
-            self.pub_points.publish(make_cloud(result, stamp, frame_id))
+            self.pub_points.publish(cloud_msg(cloud_fields(result.points, stamp, frame_id)))
         self.touch.process(result.points, stamp,
                            result.frame_id or str(left_msg.header.frame_id))
         if self.pub_sym:
@@ -404,22 +404,6 @@ class DecoderNode(Node):
 
 
 # ---------------------------------------------------------------------- messages
-
-
-def make_cloud(result: StereoResult, stamp: tuple[int, int], frame_id: str) -> PointCloud2:
-    """Contract PointCloud2 (rclpy) from a pipeline result, stamped exactly."""
-    f = cloud_fields(result.points, stamp, frame_id)
-    msg = PointCloud2()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = stamp
-    msg.header.frame_id = frame_id
-    msg.height, msg.width = f["height"], f["width"]
-    msg.fields = [PointField(name=d["name"], offset=d["offset"], datatype=d["datatype"],
-                             count=d["count"]) for d in f["fields"]]
-    msg.is_bigendian = False
-    msg.point_step, msg.row_step = f["point_step"], f["row_step"]
-    msg.data = array.array("B", f["data"])
-    msg.is_dense = True
-    return msg
 
 
 def make_symbol_array(g: Glyphs, header: Any, patches: bool = False) -> Any:
