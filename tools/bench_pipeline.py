@@ -302,7 +302,7 @@ def _touch_stage(pipe):
 
 def flips(args: argparse.Namespace) -> int:
     """Coverage and wrong cells with and without random label flips."""
-    from tactile_sl_decoder.tooling.e2e_metrics import evaluate_bag, flip_labels_hook
+    from tactile_sl_decoder.tooling.bag_runs import evaluate_bag, flip_labels_hook
 
     _set_threads(args.cpu_threads)
     pipe = _pipeline(args)

@@ -26,7 +26,8 @@ import numpy as np
 
 from tactile_sl_camera.elasticity import Elastomer
 from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
-from tactile_sl_decoder.tooling.touch_metrics import evaluate_touch_bag, format_report, sensor_text
+from tactile_sl_decoder.tooling.bag_runs import evaluate_touch_bag
+from tactile_sl_decoder.tooling.touch_metrics import format_report, sensor_text
 from tactile_sl_decoder.touch.sensor import SensorConfig
 
 REPO = pathlib.Path(__file__).resolve().parents[1]

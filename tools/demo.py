@@ -39,18 +39,16 @@ from tactile_sl_camera.images import to_gray
 from tactile_sl_decoder.frames import bag_frames
 from tactile_sl_decoder.pipeline import PatternSpec
 from tactile_sl_decoder.symbol_array import from_message
-from tactile_sl_decoder.tooling.e2e_metrics import (
-    aggregate,
-    format_table,
-    frame_metrics,
+from tactile_sl_decoder.tooling.e2e_metrics import aggregate, format_table, frame_metrics
+from tactile_sl_decoder.tooling.pictures import (
     render_cloud,
+    render_depth,
     render_overlay,
+    render_pressure,
 )
 from tactile_sl_decoder.tooling.touch_metrics import (
     has_touch_truth,
     read_truths,
-    render_depth,
-    render_pressure,
     resolve_sensor,
     sensor_text,
 )

@@ -68,7 +68,7 @@ def test_disabled_or_tiny_clouds_are_left_alone():
                                   "robust_textured_object"])
 def test_robustness_bags_decode_without_wrong_cells(name):
     from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
-    from tactile_sl_decoder.tooling.e2e_metrics import evaluate_bag
+    from tactile_sl_decoder.tooling.bag_runs import evaluate_bag
 
     bag = REPO / "bags" / f"{name}.mcap"
     if not bag.exists():

@@ -246,7 +246,7 @@ def test_shipped_pattern_decodes_and_matches_the_printed_artwork():
 
 
 def test_demo_pictures(scene):
-    from tactile_sl_decoder.tooling.e2e_metrics import render_cloud, render_overlay
+    from tactile_sl_decoder.tooling.pictures import render_cloud, render_overlay
 
     pipe = StereoPipeline(PATTERN)
     gl, _ = _glyphs(scene, scene.uv_l, 5)
@@ -264,7 +264,7 @@ def test_e2e_section_reports_per_frame_and_per_bag(tmp_path):
     import argparse
     import json
 
-    from tactile_sl_decoder.tooling.e2e_metrics import e2e_section
+    from tactile_sl_decoder.cli.evaluate_cmd import e2e_section
 
     bag = REPO / "bags" / "no_contact.mcap"
     args = argparse.Namespace(pattern=None, weights=None, namespace="/tactile", max_frames=1,

@@ -1,5 +1,5 @@
-"""Touch figures (tactile_sl_decoder.tooling.touch_metrics): metrics with known errors, pictures,
-and the `tactile-sl evaluate` touch section on a bundled touch bag."""
+"""Touch figures (tactile_sl_decoder.tooling.touch_metrics): metrics with known errors, pictures
+(tooling.pictures), and the `tactile-sl evaluate` touch section on a bundled touch bag."""
 import argparse
 import json
 import shutil
@@ -9,16 +9,15 @@ import pytest
 
 from tactile_sl_camera.clouds import pack_field
 from tactile_sl_camera.sim.loads import TouchTruth
+from tactile_sl_decoder.cli.evaluate_cmd import touch_section
+from tactile_sl_decoder.tooling.pictures import render_depth, render_pressure
 from tactile_sl_decoder.tooling.touch_metrics import (
     CHECKS,
     bag_totals,
     compare_frame,
     displacement_rmse,
     format_report,
-    render_depth,
-    render_pressure,
     resolve_sensor,
-    touch_section,
 )
 from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.stage import TouchResult

@@ -136,28 +136,130 @@ def _by_scene(rows: list[Any], totals: list[Any]) -> list[list[Any]]:
     return out
 
 
-def e2e_sections(args: argparse.Namespace, bags: list[Path]) -> str:
-    """End-to-end figures: coverage, wrong cells, 3-D error against ground truth."""
-    from tactile_sl_decoder.tooling.e2e_metrics import e2e_section
+def e2e_section(args: argparse.Namespace, bags: list[Path]) -> str:
+    """End-to-end figures per frame and per bag: coverage, wrong cells, 3-D error.
 
-    return e2e_section(args, bags)
+    Reads ``args.pattern``, ``args.weights``, ``args.namespace``, ``args.max_frames``,
+    ``args.totals_only`` and ``args.json`` (figures also written to
+    ``<json stem>.e2e.json``) when present.
+    """
+    import io
+
+    from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
+    from tactile_sl_decoder.tooling.bag_runs import evaluate_bag
+    from tactile_sl_decoder.tooling.e2e_metrics import BagMetrics, FrameMetrics, format_table
+
+    classifier = None
+    weights = getattr(args, "weights", None)
+    if weights:
+        from tactile_sl_decoder.classify.classifier import Classifier
+
+        classifier = Classifier.load(weights)
+    pattern = getattr(args, "pattern", None)
+    pipe = StereoPipeline(PatternSpec.load(pattern), classifier)
+    namespace = getattr(args, "namespace", "/tactile")
+    per_bag: list[BagMetrics] = []
+    per_frame: list[tuple[str, FrameMetrics]] = []
+    try:
+        for bag in bags:
+            frames, summary = evaluate_bag(bag, pipe, namespace, progress=sys.stderr,
+                                           max_frames=int(getattr(args, "max_frames", 0) or 0))
+            per_bag.append(summary)
+            per_frame += [(summary.name, f) for f in frames]
+    finally:
+        pipe.close()
+    out = io.StringIO()
+    print("End to end (decoded cells and 3-D points vs ground truth; coverage = visible "
+          "glyphs decoded to the right cell and triangulated)", file=out)
+    if not getattr(args, "totals_only", False):
+        print(f"{'bag':<24} {'stamp':>20} {'visible':>8} {'points':>7} {'coverage':>9} "
+              f"{'wrong':>6} {'rmse mm':>8} {'med mm':>7} {'p95 mm':>7} {'ms':>6}", file=out)
+        for name, f in per_frame:
+            s = f.summary()
+            print(f"{name:<24} {f.stamp_ns:>20} {f.visible:>8} {f.points:>7} "
+                  f"{100 * f.coverage:>8.2f}% {f.wrong:>6} {1e3 * s['rmse_m']:>8.4f} "
+                  f"{1e3 * s['median_m']:>7.4f} {1e3 * s['p95_m']:>7.4f} "
+                  f"{f.timings_ms.get('total', float('nan')):>6.1f}", file=out)
+        print(file=out)
+    format_table(per_bag, file=out)
+    json_path = getattr(args, "json", None)
+    if json_path:
+        target = Path(json_path).with_suffix(".e2e.json")
+        target.write_text(json.dumps({
+            "bags": [b.summary() for b in per_bag],
+            "frames": [dict(bag=name, **f.summary()) for name, f in per_frame]}, indent=1))
+        print(f"(end-to-end figures also in {target})", file=out)
+    return out.getvalue().rstrip("\n")
 
 
-def touch_sections(args: argparse.Namespace, bags: list[Path]) -> str:
-    """Touch figures (displacement, force, moment, contact) of bags with touch ground truth."""
+def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
+    """Touch figures (displacement, force, moment, contact) of bags with touch ground truth.
+
+    Reads ``args.sensor``, ``args.reference_frames``, ``args.pattern``, ``args.weights``,
+    ``args.namespace``, ``args.max_frames``, ``args.totals_only`` and ``args.json`` (figures
+    also written to ``<json stem>.touch.json``) when present.
+    """
+    from dataclasses import asdict
+
     from tactile_sl_camera.bag_io import BagError
-    from tactile_sl_decoder.tooling.touch_metrics import touch_section
+    from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
+    from tactile_sl_decoder.tooling.bag_runs import evaluate_touch_bag
+    from tactile_sl_decoder.tooling.touch_metrics import (
+        LIMITS,
+        format_report,
+        has_touch_truth,
+        resolve_sensor,
+        sensor_text,
+    )
     from tactile_sl_decoder.touch.sensor import SensorFileError
 
     try:
-        return touch_section(args, bags)
+        namespace = getattr(args, "namespace", "/tactile")
+        touch_bags = [b for b in bags if has_touch_truth(b, namespace)]
+        if not touch_bags:
+            return ("Touch: no bag carries ground_truth/wrench (render touch scenes with "
+                    "`tactile-sl synth`, e.g. bags/touch_scenes.yaml)")
+        sensor_path = getattr(args, "sensor", None)
+        sensors = [resolve_sensor(b, sensor_path) for b in touch_bags]
+        classifier = None
+        weights = getattr(args, "weights", None)
+        if weights:
+            from tactile_sl_decoder.classify.classifier import Classifier
+
+            classifier = Classifier.load(weights)
+        pipe = StereoPipeline(PatternSpec.load(getattr(args, "pattern", None)), classifier)
+        per_bag = []
+        try:
+            for bag, (sensor, where) in zip(touch_bags, sensors):
+                frames = evaluate_touch_bag(
+                    bag, pipe, sensor, int(getattr(args, "reference_frames", 1) or 1), namespace,
+                    progress=sys.stderr, max_frames=int(getattr(args, "max_frames", 0) or 0))
+                per_bag.append((Path(bag).stem, f"{sensor_text(sensor)} ({where})", frames))
+        finally:
+            pipe.close()
+        text, totals = format_report(per_bag, bool(getattr(args, "totals_only", False)))
+        skipped = [Path(b).stem for b in bags if b not in touch_bags]
+        if skipped:
+            text += f"\n(no touch ground truth, not in the touch figures: {', '.join(skipped)})"
+        json_path = getattr(args, "json", None)
+        if json_path:
+            from tactile_sl_camera.safe_files import write_text
+
+            target = Path(json_path).with_suffix(".touch.json")
+            write_text(target, json.dumps({
+                "limits": asdict(LIMITS),
+                "sensors": {name: sensor for name, sensor, _ in per_bag},
+                "bags": totals,
+                "frames": [f.summary() for _, _, frames in per_bag for f in frames]}, indent=1))
+            text += f"\n(touch figures also in {target})"
+        return text
     except (SensorFileError, BagError) as exc:
         raise SystemExit(f"evaluate: {exc}") from None
 
 
 SECTIONS: list[Callable[[argparse.Namespace, list[Path]], str]] = [symbol_sections,
-                                                                  e2e_sections,
-                                                                  touch_sections]
+                                                                  e2e_section,
+                                                                  touch_section]
 """Report sections, printed in order."""
 
 

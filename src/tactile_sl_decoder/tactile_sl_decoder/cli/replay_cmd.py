@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from tactile_sl_decoder.frames import bag_frames, bag_topics, count_bag_frames
     from tactile_sl_decoder.glyphs import PipelineInputError
     from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline
-    from tactile_sl_decoder.tooling.e2e_metrics import progress_bar
+    from tactile_sl_decoder.tooling.progress import progress_bar
 
     out_path = Path(args.output)
     try:     # OUT must not be IN: decided by the file system (hard links, bag directories)

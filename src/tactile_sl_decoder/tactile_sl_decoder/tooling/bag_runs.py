@@ -1,0 +1,130 @@
+"""Bag drivers: the shared pipeline over a bag, as ``tactile-sl replay`` runs it (no rclpy).
+
+``evaluate_bag`` runs the shared :class:`~tactile_sl_decoder.pipeline.StereoPipeline` over
+a bag (the same path as ``tactile-sl replay``) and returns per-frame and per-bag figures.
+``evaluate_touch_bag`` adds the touch stage and returns the touch figures of every frame
+(definitions in :mod:`~tactile_sl_decoder.tooling.e2e_metrics` and
+:mod:`~tactile_sl_decoder.tooling.touch_metrics`).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, TextIO
+
+import numpy as np
+
+from tactile_sl_decoder.tooling.e2e_metrics import (
+    BagMetrics,
+    FrameMetrics,
+    aggregate,
+    frame_metrics,
+)
+from tactile_sl_decoder.tooling.progress import progress_bar
+from tactile_sl_decoder.tooling.touch_metrics import (
+    NAN,
+    TouchFrameMetrics,
+    compare_frame,
+    read_truths,
+)
+
+
+def flip_labels_hook(rate: float, symbols: int, seed: int = 0) -> Callable[[Any, Any], None]:
+    """Label hook for :meth:`StereoPipeline.process` that flips labels at random.
+
+    Each known (classified) label is replaced by another symbol with probability ``rate``
+    (robustness benchmark: errors injected after classification).
+    """
+    rng = np.random.default_rng(seed)
+
+    def hook(left: Any, right: Any) -> None:
+        for g in (left, right):
+            known = g.label < symbols
+            flip = known & (rng.random(len(g.label)) < rate)
+            g.label = g.label.copy()
+            g.label[flip] = (g.label[flip].astype(np.int64)
+                             + rng.integers(1, symbols, int(flip.sum()))) % symbols
+    return hook
+
+
+def evaluate_bag(path: str | Path, pipeline: Any, namespace: str = "/tactile",
+                 match_tol_m: float | None = None, label_hook: Callable | None = None,
+                 progress: TextIO | None = None, max_frames: int = 0
+                 ) -> tuple[list[FrameMetrics], BagMetrics]:
+    """Run the pipeline over a bag with ground truth; per-frame and per-bag figures.
+
+    ``match_tol_m`` defaults to half the pattern pitch (or 0.25 mm if the pitch is unknown).
+    Frames without ground truth are skipped.
+    """
+    from tactile_sl_camera.images import to_gray
+    from tactile_sl_decoder.frames import bag_frames, count_bag_frames
+
+    pitch = float(getattr(pipeline.pattern, "pitch_m", 0.0) or 0.0)
+    tol = match_tol_m if match_tol_m is not None else (0.5 * pitch if pitch > 0 else 2.5e-4)
+    total = count_bag_frames(path, namespace)
+    frames: list[FrameMetrics] = []
+    for i, frame in enumerate(bag_frames(path, namespace)):
+        if max_frames and i >= max_frames:
+            break
+        if progress is not None:
+            progress_bar(progress, i + 1, total, Path(path).name)
+        if frame.ground_truth is None:
+            continue
+        result = pipeline.process(to_gray(frame.left_image), to_gray(frame.right_image),
+                                  frame.left_info, frame.right_info, label_hook=label_hook)
+        fm = frame_metrics(result.points, frame.ground_truth, tol, frame.stamp_ns)
+        fm.timings_ms = dict(result.timings_ms)
+        frames.append(fm)
+    if progress is not None:
+        progress.write("\n")
+    return frames, aggregate(Path(path).stem, frames)
+
+
+def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_frames: int = 1,
+                       namespace: str = "/tactile", progress: TextIO | None = None,
+                       max_frames: int = 0, untouched: bool = False
+                       ) -> list[TouchFrameMetrics]:
+    """Pipeline + touch stage over a bag (as ``tactile-sl replay``), each frame decoded once.
+
+    Frames used for the reference give no figures.  ``untouched``: the bag has no touch
+    ground truth and the pad is at rest throughout (a control: zero truth).
+    Timings per frame: ``pipeline`` (the pipeline's total) and ``touch`` (the stage's).
+    """
+    from tactile_sl_camera.images import to_gray
+    from tactile_sl_decoder.frames import bag_frames, count_bag_frames
+    from tactile_sl_decoder.touch.reference import ReferenceError
+    from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
+
+    truths = {} if untouched else read_truths(path, namespace)
+    pattern = pipeline.pattern
+    stage = TouchStage(sensor, pattern.array.shape, pattern.pitch_m,
+                       bool(pipeline.params.decode.mirrored),
+                       TouchParams(reference_frames=reference_frames))
+    name = Path(path).stem
+    total = count_bag_frames(path, namespace)
+    out: list[TouchFrameMetrics] = []
+    for i, frame in enumerate(bag_frames(path, namespace, ground_truth=False)):
+        if max_frames and i >= max_frames:
+            break
+        if progress is not None:
+            progress_bar(progress, i + 1, total, name)
+        truth = truths.get(frame.stamp_ns)
+        if truth is None and not untouched:
+            continue
+        result = pipeline.process(to_gray(frame.left_image), to_gray(frame.right_image),
+                                  frame.left_info, frame.right_info)
+        was_ready = stage.ready
+        try:
+            touch = stage.update(result.points)
+        except ReferenceError:
+            stage.tare()
+            touch = None
+        if not was_ready:
+            continue                       # a reference frame (or the reference failed)
+        m = compare_frame(touch, truth, name, frame.stamp_ns)
+        m.timings_ms = {"pipeline": float(result.timings_ms.get("total", NAN))}
+        if touch is not None:
+            m.timings_ms["touch"] = float(touch.timings_ms.get("touch", NAN))
+        out.append(m)
+    if progress is not None:
+        progress.write("\n")
+    return out
