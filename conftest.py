@@ -6,9 +6,11 @@ workspace paths and the process helpers from one place, ``tests/ros_harness.py``
 import os
 import sys
 
-os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-os.environ.setdefault("ROS_DOMAIN_ID", str(50 + os.getpid() % 40))
-os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = os.path.join(  # even after robot-mode env.sh
-    os.path.dirname(os.path.abspath(__file__)), "config", "fastdds_loopback.xml")
-
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "tests"))
+
+from ros_harness import REPO, next_domain_id  # noqa: E402
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.setdefault("ROS_DOMAIN_ID", str(next_domain_id()))
+os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(  # even after robot-mode env.sh
+    REPO / "config" / "fastdds_loopback.xml")

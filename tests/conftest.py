@@ -1,15 +1,19 @@
 """Integration-test fixtures: loopback-only DDS, per-test domains, and a DDS leak watch."""
 from __future__ import annotations
 
+import contextlib
+import itertools
 import pathlib
 import sys
+from dataclasses import dataclass
+from typing import Callable, Iterator
 
 import pytest
 
 sys.path.insert(0, str(pathlib.Path(__file__).parent))
 
 from dds_sniffer import DdsSniffer  # noqa: E402
-from ros_harness import REPO, next_domain_id  # noqa: E402
+from ros_harness import REPO, Probe, RunningNode, next_domain_id, running_node  # noqa: E402
 
 _sniffer: DdsSniffer | None = None
 
@@ -53,3 +57,38 @@ def domain_id() -> int:
 @pytest.fixture
 def repo() -> pathlib.Path:
     return REPO
+
+
+@dataclass
+class DecoderGraph:
+    """The test's probe node and a ``start(*ros_args)`` for decoder processes beside it."""
+
+    probe: Probe
+    start: Callable[..., RunningNode]
+
+    @property
+    def node(self):
+        return self.probe.node
+
+    def spin(self, seconds: float) -> None:
+        self.probe.spin(seconds)
+
+    def spin_once(self) -> None:
+        self.probe.spin_once()
+
+
+@pytest.fixture
+def ros(tmp_path: pathlib.Path, domain_id: int) -> Iterator[DecoderGraph]:
+    """A probe node on a fresh domain; ``start`` runs the installed decoder in /tactile there.
+
+    Each decoder's output goes to ``tmp_path/decoder<n>.log``; every one is stopped before the
+    probe closes.
+    """
+    numbers = itertools.count()
+    with Probe("decoder_test", domain_id) as probe, contextlib.ExitStack() as decoders:
+        def start(*ros_args: str) -> RunningNode:
+            log = tmp_path / f"decoder{next(numbers)}.log"
+            return decoders.enter_context(running_node(
+                "tactile_sl_decoder", "decoder", domain_id,
+                ["-r", "__ns:=/tactile", "-p", "warn_period:=0.0", *ros_args], log))
+        yield DecoderGraph(probe, start)

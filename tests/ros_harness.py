@@ -1,14 +1,22 @@
-"""Helpers for tests that run real node executables over DDS, confined to loopback."""
+"""The one harness for process tests: workspace paths, domain ids, executables, logs, probes.
+
+Every test of the workspace takes ``REPO``/``BAGS`` from here; every test that runs node
+executables or an rclpy node over DDS takes its domain id (:func:`next_domain_id`), child
+environment (:func:`ros_env`), executable (:func:`executable`, through the ament index),
+captured log (:func:`running_node`) and in-process node (:class:`Probe`) from here, so no
+test file invents its own.  rclpy is imported only when a probe is made: unit tests that
+import ``REPO`` stay free of it.
+"""
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import pathlib
 import subprocess
 import time
-from typing import Callable
-
-from ament_index_python.packages import get_package_prefix
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 """The workspace root (bags/, config/, install/), for every test of the workspace."""
@@ -29,11 +37,17 @@ def ros_env(domain_id: int) -> dict[str, str]:
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env["ROS_DOMAIN_ID"] = str(domain_id)
     env.setdefault("RCUTILS_LOGGING_BUFFERED_STREAM", "0")
+    env.setdefault("PYTHONUNBUFFERED", "1")   # a log read mid-test holds what was printed
     return env
 
 
 def executable(package: str, name: str) -> pathlib.Path:
-    """What `ros2 run PACKAGE NAME` runs: <prefix>/lib/<package>/<name> via the ament index."""
+    """What `ros2 run PACKAGE NAME` runs: <prefix>/lib/<package>/<name> via the ament index.
+
+    Raises (the test fails, never skips) when the workspace has not been built.
+    """
+    from ament_index_python.packages import get_package_prefix
+
     path = pathlib.Path(get_package_prefix(package)) / "lib" / package / name
     if not os.access(path, os.X_OK):
         raise FileNotFoundError(f"{path} is not an executable (was the workspace built?)")
@@ -43,12 +57,98 @@ def executable(package: str, name: str) -> pathlib.Path:
 def start_node(package: str, name: str, domain_id: int, ros_args: list[str],
                log_path: pathlib.Path) -> subprocess.Popen:
     """Start an installed node executable as its own process, output to log_path."""
-    log = open(log_path, "w")
-    return subprocess.Popen([str(executable(package, name)), "--ros-args", *ros_args],
-                            env=ros_env(domain_id), stdout=log, stderr=subprocess.STDOUT)
+    with open(log_path, "w") as log:     # the child keeps its own descriptor
+        return subprocess.Popen([str(executable(package, name)), "--ros-args", *ros_args],
+                                env=ros_env(domain_id), stdout=log, stderr=subprocess.STDOUT)
+
+
+@dataclass
+class RunningNode:
+    """A node process started by :func:`running_node`, with its captured stdout and stderr."""
+
+    process: subprocess.Popen
+    log_path: pathlib.Path
+
+    def log(self) -> str:
+        """Everything the node has printed so far."""
+        return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
+
+    def lines(self) -> list[str]:
+        return self.log().splitlines()
+
+    def wait_for_log(self, text: str, timeout: float,
+                     spin: Callable[[], None] = lambda: time.sleep(0.05)) -> bool:
+        """True once ``text`` is in the log; False at the timeout or when the node has exited."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.log():
+                return True
+            if self.process.poll() is not None:
+                break
+            spin()
+        return text in self.log()
+
+
+@contextlib.contextmanager
+def running_node(package: str, name: str, domain_id: int, ros_args: list[str],
+                 log_path: pathlib.Path) -> Iterator[RunningNode]:
+    """Run an installed node for the ``with`` block, its output captured in ``log_path``.
+
+    The node is stopped on exit, also when the block fails, and its log stays readable.
+    """
+    node = RunningNode(start_node(package, name, domain_id, ros_args, log_path), log_path)
+    try:
+        yield node
+    finally:
+        stop(node.process)
+
+
+class Probe:
+    """The test's own rclpy node: a private context on one domain, spun by the test.
+
+    Use as a context manager (or call :meth:`close`); subscriptions and publishers are made on
+    ``probe.node``.
+    """
+
+    def __init__(self, name: str, domain_id: int, namespace: str | None = None) -> None:
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = rclpy.create_node(name, namespace=namespace, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_once(self, timeout: float = 0.05) -> None:
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def spin(self, seconds: float) -> None:
+        """Handle callbacks for ``seconds`` (waiting in short steps)."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=min(0.02, max(0.0, end - time.monotonic())))
+
+    def spin_until(self, predicate: Callable[[], Any], timeout: float) -> bool:
+        return bool(wait_until(predicate, timeout, self.spin_once))
+
+    def close(self) -> None:
+        import rclpy
+
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+    def __enter__(self) -> "Probe":
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
 
 
 def wait_until(predicate: Callable[[], bool], timeout: float, spin: Callable[[], None]) -> bool:
+    """Call ``spin`` until ``predicate()`` holds or ``timeout`` seconds have passed."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if predicate():
@@ -58,6 +158,7 @@ def wait_until(predicate: Callable[[], bool], timeout: float, spin: Callable[[],
 
 
 def stop(process: subprocess.Popen, timeout: float = 10.0) -> int:
+    """SIGTERM, then SIGKILL after ``timeout`` seconds; the exit code."""
     if process.poll() is None:
         process.terminate()
         try:

@@ -4,101 +4,16 @@ The node runs as its own process (installed executable), on a ROS domain of its 
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; the test publishes stereo frames from a bundled bag
 and listens for point clouds.
 """
-import os
-import subprocess
-import threading
 import time
 
 import numpy as np
 import pytest
 
-from ros_harness import REPO
+from ros_harness import BAGS
 
-EXE = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder" / "decoder"
-BAG = REPO / "bags" / "sphere_deep_small.mcap"
+BAG = BAGS / "sphere_deep_small.mcap"
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-
-
-class NodeProcess:
-    """The decoder executable with its output collected line by line."""
-
-    def __init__(self, domain, args):
-        env = dict(os.environ, ROS_DOMAIN_ID=str(domain),
-                   ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1",
-                   RCUTILS_LOGGING_BUFFERED_STREAM="0")
-        self.proc = subprocess.Popen([str(EXE), "--ros-args", "-r", "__ns:=/tactile", *args],
-                                     env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True)
-        self.lines = []
-        self._t = threading.Thread(target=self._read, daemon=True)
-        self._t.start()
-
-    def _read(self):
-        for line in self.proc.stdout:
-            self.lines.append(line.rstrip())
-
-    def wait_for(self, text, timeout=20.0, spin=None):
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if any(text in line for line in self.lines):
-                return True
-            if self.proc.poll() is not None:
-                break
-            if spin:
-                spin(0.05)
-            else:
-                time.sleep(0.05)
-        return any(text in line for line in self.lines)
-
-    def stop(self):
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(5)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-
-
-@pytest.fixture
-def ros(tmp_path):
-    """rclpy context on a fresh domain + a decoder process on the same domain."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-
-    if not EXE.exists():
-        pytest.fail(f"{EXE} not installed: run `make setup`")
-    domain = 100 + (os.getpid() * 7 + int(time.time() * 1000)) % 100
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=domain)
-    node = Node("decoder_test", context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    procs = []
-
-    def start(*args):
-        p = NodeProcess(domain, ["-p", "warn_period:=0.0", *args])
-        procs.append(p)
-        return p
-
-    yield SimpleRos(node, ex, start)
-    for p in procs:
-        p.stop()
-    ex.shutdown()
-    node.destroy_node()
-    rclpy.shutdown(context=ctx)
-
-
-class SimpleRos:
-    def __init__(self, node, ex, start):
-        self.node, self.ex, self.start = node, ex, start
-
-    def spin(self, seconds):
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.ex.spin_once(timeout_sec=min(0.02, max(0.0, end - time.monotonic())))
 
 
 def _bag_messages(limit_frames=2):
@@ -199,9 +114,9 @@ def test_bad_input_is_warned_skipped_and_survived(ros):
                 clock[0] += 1
                 pubs[("image", "left")].publish(_stamped(img["left"], clock[0], 0))
                 pubs[("image", "right")].publish(_stamped(img["right"], clock[0], 0))
-            if proc.wait_for(text, timeout=4.0, spin=ros.spin):
+            if proc.wait_for_log(text, 4.0, ros.spin_once):
                 return
-        pytest.fail(f"no warning {text!r}: {proc.lines[-6:]}")
+        pytest.fail(f"no warning {text!r}: {proc.lines()[-6:]}")
 
     def good_cloud():
         clock[0] += 1
@@ -213,7 +128,7 @@ def test_bad_input_is_warned_skipped_and_survived(ros):
             ros.spin(0.2)
             pubs[("image", "left")].publish(_stamped(img["left"], *stamp))
             pubs[("image", "right")].publish(_stamped(img["right"], *stamp))
-        assert _send_until_cloud(ros, clouds, stamp, publish), proc.lines
+        assert _send_until_cloud(ros, clouds, stamp, publish), proc.log()
         cloud = [c for c in clouds if (c.header.stamp.sec, c.header.stamp.nanosec) == stamp]
         assert cloud[0].width > 500 and cloud[0].is_dense and cloud[0].height == 1
 
@@ -260,7 +175,7 @@ def test_bad_input_is_warned_skipped_and_survived(ros):
            sync=False)
     # still alive and still decoding
     good_cloud()
-    assert proc.proc.poll() is None
+    assert proc.process.poll() is None
 
 
 def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
@@ -289,7 +204,7 @@ def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
                 ros.spin(0.2 if kind == "info" else 0.02)
         _send_until_cloud(ros, clouds, stamp, publish)
     online = {(c.header.stamp.sec, c.header.stamp.nanosec): bytes(c.data) for c in clouds}
-    assert set(online) == set(frames), proc.lines[-5:]
+    assert set(online) == set(frames), proc.lines()[-5:]
     for stamp in online:
         assert online[stamp] == offline[stamp]
 
@@ -335,7 +250,7 @@ def test_symbols_input_gives_the_same_points_as_images(ros, tmp_path):
                 ros.spin(0.02)
         _send_until_cloud(ros, clouds, stamp, publish)
     online = {(c.header.stamp.sec, c.header.stamp.nanosec): bytes(c.data) for c in clouds}
-    assert set(online) == set(frames), proc.lines[-5:]
+    assert set(online) == set(frames), proc.lines()[-5:]
     for stamp in online:
         assert online[stamp] == offline[stamp]
 

@@ -6,16 +6,13 @@ import time
 
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 
 from tactile_sl_camera.bag_io import BagReader, BagWriter
 from tactile_sl_camera.images import image_fields
 
-from ros_harness import start_node, stop, wait_until
+from ros_harness import Probe, start_node, stop, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -43,12 +40,9 @@ def write_test_bag(path: pathlib.Path, frames: int = 6) -> None:
 def collect_replay(bag: pathlib.Path, domain_id: int, tmp_path: pathlib.Path,
                    extra_args: list[str] = ()) -> tuple[dict, int]:
     """Run `replay` on the bag and return {topic: [(stamp_ns, data bytes)]} and its exit code."""
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
     received: dict[str, list] = {}
-    node = rclpy.create_node("test_listener", namespace="/tactile", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+    probe = Probe("test_listener", domain_id, namespace="/tactile")
+    node, executor = probe.node, probe.executor
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     try:
         for side in ("left", "right"):
@@ -73,9 +67,7 @@ def collect_replay(bag: pathlib.Path, domain_id: int, tmp_path: pathlib.Path,
         code = stop(process)
         return received, code
     finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
+        probe.close()
 
 
 def bag_images(path: pathlib.Path) -> dict[str, list]:

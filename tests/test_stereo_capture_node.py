@@ -1,62 +1,34 @@
 """The stereo_camera and sim_camera nodes, run as executables over loopback DDS."""
 from __future__ import annotations
 
-import os
-import pathlib
-import subprocess
-import time
-
 import cv2
 import numpy as np
 import pytest
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from tactile_sl_camera.camera_info import save_camera_info_yaml
+from tactile_sl_camera.clouds import cloud_to_arrays
+from tactile_sl_camera.sim.optics import SimulatedCameraPair
+
+from ros_harness import Probe, running_node
 
 pytestmark = pytest.mark.ros
 
-rclpy = pytest.importorskip("rclpy")
-from ament_index_python.packages import get_package_prefix  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.qos import qos_profile_sensor_data  # noqa: E402
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2  # noqa: E402
 
-from tactile_sl_camera.camera_info import save_camera_info_yaml  # noqa: E402
-from tactile_sl_camera.clouds import cloud_to_arrays  # noqa: E402
-from tactile_sl_camera.sim.optics import SimulatedCameraPair  # noqa: E402
-
-DOMAIN = 60 + (os.getpid() * 7) % 41
-
-
-def _start(executable: str, params: dict[str, str], log: pathlib.Path) -> subprocess.Popen:
-    exe = pathlib.Path(get_package_prefix("tactile_sl_camera")) / "lib" / "tactile_sl_camera" \
-        / executable
-    env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(DOMAIN),
-               RCUTILS_LOGGING_BUFFERED_STREAM="0")
-    args = [str(exe), "--ros-args", "-r", "__ns:=/tactile"]
+def _run(executable: str, params: dict[str, str], domain_id: int, log):
+    """The camera node in /tactile with ``params``, its output in ``log``."""
+    args = ["-r", "__ns:=/tactile"]
     for k, v in params.items():
         args += ["-p", f"{k}:={v}"]
-    return subprocess.Popen(args, env=env, stdout=open(log, "w"), stderr=subprocess.STDOUT)
+    return running_node("tactile_sl_camera", executable, domain_id, args, log)
 
 
-def _stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-
-
-class Listener:
+class Listener(Probe):
     """Subscribes to the camera topics in /tactile and keeps (stamp, message) per topic."""
 
-    def __init__(self, with_truth: bool = False):
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=DOMAIN)
-        self.node = rclpy.create_node("camera_test_listener", namespace="/tactile",
-                                      context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+    def __init__(self, domain_id: int, with_truth: bool = False):
+        super().__init__("camera_test_listener", domain_id, namespace="/tactile")
         self.got: dict[str, list] = {}
         topics = [("left/image_raw", Image), ("right/image_raw", Image),
                   ("left/camera_info", CameraInfo), ("right/camera_info", CameraInfo)]
@@ -69,19 +41,6 @@ class Listener:
                     ((m.header.stamp.sec, m.header.stamp.nanosec), m)),
                 qos_profile_sensor_data if kind is not PointCloud2 else 10)
 
-    def spin_until(self, predicate, timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if predicate():
-                return True
-            self.executor.spin_once(timeout_sec=0.05)
-        return predicate()
-
-    def close(self):
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
-
 
 def _write_video(path, values, size=(160, 120)):
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), 10, size)
@@ -92,20 +51,20 @@ def _write_video(path, values, size=(160, 120)):
     writer.release()
 
 
-def test_stereo_camera_node_from_video_files(tmp_path):
+def test_stereo_camera_node_from_video_files(tmp_path, domain_id):
     left, right = tmp_path / "left.avi", tmp_path / "right.avi"
     _write_video(left, [40] * 50)
     rig = SimulatedCameraPair()
     save_camera_info_yaml(tmp_path / "left.yaml", rig.left_info)
     save_camera_info_yaml(tmp_path / "right.yaml", rig.right_info)
     log = tmp_path / "node.log"
-    proc = _start("stereo_camera", {
+    with _run("stereo_camera", {
         "left_device": str(left), "right_device": str(right), "width": "160", "height": "120",
         "fps": "20.0", "reopen_interval": "0.3",
         "left_camera_info_url": f"file://{tmp_path / 'left.yaml'}",
-        "right_camera_info_url": str(tmp_path / "right.yaml")}, log)
-    listener = Listener()
-    try:
+        "right_camera_info_url": str(tmp_path / "right.yaml")}, domain_id, log) as camera, \
+            Listener(domain_id) as listener:
+        proc = camera.process
         # the right device is missing: logged, retried, no crash
         assert listener.spin_until(lambda: "cannot be opened" in log.read_text(), 20), \
             log.read_text()
@@ -128,16 +87,12 @@ def test_stereo_camera_node_from_video_files(tmp_path):
         info = infos[sorted(set(infos) & common)[0]]
         assert info.p[3] == pytest.approx(rig.right_info.P[0, 3])
         assert "opened again" in log.read_text()
-    finally:
-        listener.close()
-        _stop(proc)
 
 
-def test_sim_camera_node_publishes_frames_with_truth(tmp_path):
+def test_sim_camera_node_publishes_frames_with_truth(tmp_path, domain_id):
     log = tmp_path / "sim.log"
-    proc = _start("sim_camera", {"rate": "10.0"}, log)
-    listener = Listener(with_truth=True)
-    try:
+    with _run("sim_camera", {"rate": "10.0"}, domain_id, log), \
+            Listener(domain_id, with_truth=True) as listener:
         ok = listener.spin_until(lambda: len(listener.got["ground_truth/points"]) >= 2, 60)
         assert ok, log.read_text()
         truth_stamp, cloud = listener.got["ground_truth/points"][0]
@@ -147,6 +102,3 @@ def test_sim_camera_node_publishes_frames_with_truth(tmp_path):
         points = cloud_to_arrays(cloud)
         assert len(points) > 500 and cloud.header.frame_id == "tactile_left_optical_frame"
         assert 0.013 < float(np.median(points["z"])) < 0.017
-    finally:
-        listener.close()
-        _stop(proc)

@@ -7,14 +7,11 @@ import textwrap
 
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from tactile_sl_msgs.msg import SymbolArray
 
-from ros_harness import ros_env, stop, wait_until
+from ros_harness import Probe, ros_env, stop, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -57,11 +54,8 @@ PUBLISHER = textwrap.dedent("""
 
 def symbol_array_roundtrip(domain_id: int) -> SymbolArray:
     """Publish a 1,000-glyph SymbolArray from another process; return what arrived."""
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node("symbol_listener", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+    probe = Probe("symbol_listener", domain_id)
+    node, executor = probe.node, probe.executor
     got: list[SymbolArray] = []
     qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -71,9 +65,7 @@ def symbol_array_roundtrip(domain_id: int) -> SymbolArray:
         assert wait_until(lambda: bool(got), 30.0, lambda: executor.spin_once(timeout_sec=0.05))
     finally:
         stop(publisher)
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
+        probe.close()
     return got[0]
 
 

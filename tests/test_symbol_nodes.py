@@ -4,50 +4,32 @@ Both installed executables run on a ROS domain of their own with
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; this test process publishes images and
 SymbolArrays and listens for the labelled output.
 """
-import os
-import subprocess
+import contextlib
 import time
 
 import numpy as np
 import pytest
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+from sensor_msgs.msg import Image
 
-from ros_harness import REPO
+from tactile_sl_camera.images import image_fields
+from tactile_sl_decoder.tooling.synth_glyphs import synth_image
+from tactile_sl_msgs.msg import SymbolArray
 
-LIB = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder"
+from ros_harness import Probe, running_node
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
-def _start(name, domain, log):
-    exe = LIB / name
-    if not os.access(exe, os.X_OK):
-        pytest.skip(f"{exe} not installed (build the workspace)")
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               PYTHONUNBUFFERED="1", RCUTILS_LOGGING_BUFFERED_STREAM="0")
-    return subprocess.Popen([str(exe), "--ros-args", "-r", "__ns:=/t"], env=env,
-                            stdout=log, stderr=subprocess.STDOUT)
-
-
-def test_chain_labels_images_and_survives_bad_input(tmp_path):
-    rclpy = pytest.importorskip("rclpy")
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import QoSProfile, qos_profile_sensor_data
-    from sensor_msgs.msg import Image
-
-    from tactile_sl_camera.images import image_fields
-    from tactile_sl_decoder.tooling.synth_glyphs import synth_image
-    from tactile_sl_msgs.msg import SymbolArray
-
-    domain = 30 + os.getpid() % 30
-    logs = {n: open(tmp_path / f"{n}.log", "w") for n in ("symbol_extractor",
-                                                          "symbol_classifier")}
-    procs = [_start(n, domain, f) for n, f in logs.items()]
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain)
+def test_chain_labels_images_and_survives_bad_input(tmp_path, domain_id):
+    stack = contextlib.ExitStack()
     try:
-        node = rclpy.create_node("probe", namespace="/t", context=context)
-        ex = SingleThreadedExecutor(context=context)
-        ex.add_node(node)
+        nodes = [stack.enter_context(running_node("tactile_sl_decoder", name, domain_id,
+                                                  ["-r", "__ns:=/t"], tmp_path / f"{name}.log"))
+                 for name in ("symbol_extractor", "symbol_classifier")]
+        procs = [n.process for n in nodes]
+        probe = stack.enter_context(Probe("probe", domain_id, namespace="/t"))
+        node, ex = probe.node, probe.executor
         got = []
         node.create_subscription(SymbolArray, "labelled_symbols", got.append,
                                  QoSProfile(depth=50))
@@ -118,25 +100,12 @@ def test_chain_labels_images_and_survives_bad_input(tmp_path):
         assert spin_until(lambda: any(m.header.stamp.sec == 22 for m in got), 10.0)
         assert not any(m.header.stamp.sec in (20, 21) for m in got)
         assert all(p.poll() is None for p in procs)
-        ex.shutdown()
-        node.destroy_node()
     except AssertionError as exc:  # say what the nodes said
-        for f in logs.values():
-            f.flush()
-        text = "\n".join(f"--- {n}\n{(tmp_path / f'{n}.log').read_text()[-3000:]}"
-                         for n in logs)
+        text = "\n".join(f"--- {n.log_path.stem}\n{n.log()[-3000:]}" for n in nodes)
         raise AssertionError(f"{exc}\n{text}") from None
     finally:
-        rclpy.shutdown(context=context)
-        for p in procs:
-            p.terminate()
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-        for f in logs.values():
-            f.close()
-    text = {n: (tmp_path / f"{n}.log").read_text() for n in logs}
+        stack.close()   # the probe, then the nodes
+    text = {n.log_path.stem: n.log() for n in nodes}
     assert "skipping image" in text["symbol_extractor"]
     assert "skipping SymbolArray" in text["symbol_classifier"]
     assert "Traceback" not in "".join(text.values())

@@ -9,14 +9,7 @@ pad is pressed, and a bad sensor file stops the node with one FATAL line.
 import time
 
 import pytest
-from test_decoder_node import (  # noqa: F401  (ros is a fixture)
-    BAG,
-    _bag_messages,
-    _io,
-    _send_until_cloud,
-    _wait_matched,
-    ros,
-)
+from test_decoder_node import BAG, _bag_messages, _io, _send_until_cloud, _wait_matched
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -37,7 +30,7 @@ def _offline(tmp_path):
     return offline
 
 
-def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros, tmp_path):  # noqa: F811,E501
+def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros, tmp_path):
     from geometry_msgs.msg import WrenchStamped
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import Image, PointCloud2
@@ -65,16 +58,16 @@ def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros
             for kind, side, m in sorted(parts, key=lambda p: p[0] != "info"):
                 pubs[(kind, side)].publish(m)
                 ros.spin(0.2 if kind == "info" else 0.02)
-        assert _send_until_cloud(ros, clouds, stamp, publish), proc.lines[-5:]
+        assert _send_until_cloud(ros, clouds, stamp, publish), proc.lines()[-5:]
     end = time.monotonic() + 5
     while time.monotonic() < end and len(received["depth"]) < len(frames) - 1:
         ros.spin(0.05)
-    assert proc.wait_for("no outputs until the reference", 1.0), proc.lines
-    assert sum("no outputs until the reference" in line for line in proc.lines) == 1
-    assert proc.wait_for("fit residual", 1.0)
+    assert proc.wait_for_log("no outputs until the reference", 1.0), proc.log()
+    assert sum("no outputs until the reference" in line for line in proc.lines()) == 1
+    assert proc.wait_for_log("fit residual", 1.0)
     types = dict(zip(TOUCH_TOPICS, (PointCloud2, WrenchStamped, Contact, Image)))
     for topic in TOUCH_TOPICS:
-        assert len(received[topic]) == len(frames) - 1, (topic, proc.lines[-5:])
+        assert len(received[topic]) == len(frames) - 1, (topic, proc.lines()[-5:])
         for stamp, msg in received[topic].items():
             replayed = deserialize_message(offline[topic][stamp], types[topic])
             assert msg == replayed, f"{topic} at {stamp} differs from replay"
@@ -89,12 +82,12 @@ def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros
     assert "refused" in future.result().message
 
 
-def test_bad_sensor_file_is_one_fatal_line(ros, tmp_path):  # noqa: F811
+def test_bad_sensor_file_is_one_fatal_line(ros, tmp_path):
     bad = tmp_path / "sensor.yaml"
     bad.write_text("tactile_sl_sensor: 1\nelastomer: {youngs_modulus: -3.0e+5, "
                    "poisson_ratio: 0.49, thickness: 0.0}\n")
     proc = ros.start("-p", f"sensor_file:={bad}")
-    code = proc.proc.wait(30)
-    text = "\n".join(proc.lines)
+    code = proc.process.wait(30)
+    text = proc.log()
     assert code == 1 and "FATAL" in text and "youngs_modulus" in text, text
     assert "Traceback" not in text

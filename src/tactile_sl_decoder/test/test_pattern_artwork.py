@@ -13,8 +13,9 @@ from tactile_sl_decoder.pattern import Constraints, Pattern, load_default_patter
 from tactile_sl_decoder.pattern.artwork import render_png, render_svg
 from tactile_sl_decoder.pattern.shapes import GLYPHS, INK_AREA, default_primitives
 
-CAMERA_ARTWORK = (Path(__file__).resolve().parents[2] / "tactile_sl_camera" / "artwork"
-                  / "pattern.png")
+from ros_harness import REPO
+
+CAMERA_ARTWORK = REPO / "src" / "tactile_sl_camera" / "artwork" / "pattern.png"
 
 
 @pytest.mark.parametrize("name", list(GLYPHS))
