@@ -3,11 +3,13 @@ SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := TACTILE_SL_NETWORK=loopback source env.sh &&
 
-.PHONY: help setup build test lint unit demo bags bench clean
+.PHONY: help setup build test lint typecheck unit demo bags bench clean
 
 help:
 	@echo "make demo   - replay the bundled bag through the pipeline and print what came out"
 	@echo "make test   - lint + the whole test suite (creates .venv and builds on first use)"
+	@echo "make unit   - the fast unit tests only (no node processes, nothing slow; < 1 min)"
+	@echo "make lint   - ruff and the type checker (mypy; what the pre-commit hooks run)"
 	@echo "make setup  - create .venv and colcon build (idempotent)"
 	@echo "make bags   - regenerate bags/ from the shipped pattern (deterministic)"
 	@echo "make bench  - speed and accuracy benchmarks (figures, not pass/fail)"
@@ -20,12 +22,19 @@ build: setup
 
 lint: setup
 	@$(ENV) ruff check src tests tools
+	@$(ENV) mypy
 
+# mypy over the libraries (files and settings in pyproject.toml; cache in .mypy_cache)
+typecheck: setup
+	@$(ENV) mypy
+
+# unit tests only (src/<pkg>/test, no processes, no DDS, nothing marked slow); make test runs all
 unit: setup
-	@$(ENV) python -m pytest -q src tests
+	@$(ENV) python -m pytest -q src -m "not ros and not slow"
 
 test: setup
 	@$(ENV) ruff check src tests tools
+	@$(ENV) mypy
 	@$(ENV) python -m pytest src tests
 
 demo: setup

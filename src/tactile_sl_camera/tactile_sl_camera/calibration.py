@@ -105,13 +105,12 @@ def calibrate_stereo(pairs: Iterable[tuple[np.ndarray, np.ndarray]], pattern: tu
             raise CalibrationError(f"pair {i}: image size {left.shape[1]}x{left.shape[0]} "
                                    f"differs from the first pair's {size[0]}x{size[1]}")
         cl, cr = find_corners(left, pattern), find_corners(right, pattern)
-        ok = cl is not None and cr is not None
-        if ok:
+        if cl is not None and cr is not None:
             objs.append(obj)
             left_pts.append(cl)
             right_pts.append(cr)
         if on_pair:
-            on_pair(i, ok)
+            on_pair(i, cl is not None and cr is not None)
     if size is None:
         raise CalibrationError("no image pairs")
     if len(objs) < min_pairs:
@@ -129,11 +128,11 @@ def calibrate_stereo(pairs: Iterable[tuple[np.ndarray, np.ndarray]], pattern: tu
     rms, K1, D1, K2, D2, R, T = out[:7]
     R1, R2, P1, P2, _Q, _a, _b = cv2.stereoRectify(K1, D1, K2, D2, size, R, T.reshape(3, 1),
                                                    flags=cv2.CALIB_ZERO_DISPARITY, alpha=0.0)
-    left = CameraCalibration(size[0], size[1], K1, D1.reshape(-1)[:5], R1, P1,
-                             camera_name="tactile_left")
-    right = CameraCalibration(size[0], size[1], K2, D2.reshape(-1)[:5], R2, P2,
-                              camera_name="tactile_right")
-    return StereoCalibrationResult(left, right, np.asarray(R), np.asarray(T).reshape(3),
+    left_calib = CameraCalibration(size[0], size[1], K1, D1.reshape(-1)[:5], R1, P1,
+                                   camera_name="tactile_left")
+    right_calib = CameraCalibration(size[0], size[1], K2, D2.reshape(-1)[:5], R2, P2,
+                                    camera_name="tactile_right")
+    return StereoCalibrationResult(left_calib, right_calib, np.asarray(R), np.asarray(T).reshape(3),
                                    float(rms), float(rms_l), float(rms_r), len(objs), total)
 
 

@@ -28,14 +28,17 @@ class CameraInfoError(ValueError):
 
 @dataclass
 class CameraCalibration:
-    """Intrinsics, distortion, rectification and projection of one camera of a stereo pair."""
+    """Intrinsics, distortion, rectification and projection of one camera of a stereo pair.
+
+    P left out is the monocular ``[K | 0]``.
+    """
 
     width: int
     height: int
     K: np.ndarray
     D: np.ndarray
     R: np.ndarray = field(default_factory=lambda: np.eye(3))
-    P: np.ndarray | None = None
+    P: np.ndarray = field(default_factory=lambda: np.empty((0, 4)))
     distortion_model: str = "plumb_bob"
     camera_name: str = "camera"
 
@@ -43,7 +46,7 @@ class CameraCalibration:
         self.K = np.asarray(self.K, dtype=np.float64).reshape(3, 3)
         self.D = np.asarray(self.D, dtype=np.float64).reshape(-1)
         self.R = np.asarray(self.R, dtype=np.float64).reshape(3, 3)
-        if self.P is None:  # monocular default: P = [K | 0]
+        if self.P is None or np.size(self.P) == 0:  # monocular default: P = [K | 0]
             self.P = np.hstack([self.K, np.zeros((3, 1))])
         self.P = np.asarray(self.P, dtype=np.float64).reshape(3, 4)
         self.width = int(self.width)
@@ -229,7 +232,7 @@ def load_camera_info_yaml(path: str | os.PathLike) -> CameraCalibration:
         R = (_matrix(doc["rectification_matrix"], 3, 3, "rectification_matrix", str(p))
              if "rectification_matrix" in doc else np.eye(3))
         P = (_matrix(doc["projection_matrix"], 3, 4, "projection_matrix", str(p))
-             if "projection_matrix" in doc else None)
+             if "projection_matrix" in doc else np.hstack([K, np.zeros((3, 1))]))  # [K | 0]
         calib = CameraCalibration(
             width=int(doc["image_width"]), height=int(doc["image_height"]), K=K, D=D, R=R,
             P=P, distortion_model=str(doc.get("distortion_model", "plumb_bob")),

@@ -9,6 +9,7 @@ PointCloud2 that has the wanted fields back.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -34,6 +35,13 @@ FIELD_FORCE_DTYPE = np.dtype(FIELD_DTYPE.descr + [("fx", "<f4"), ("fy", "<f4"), 
 
 class CloudFormatError(ValueError):
     """A PointCloud2 without the contract's fields, or with inconsistent sizes."""
+
+
+def _names(dtype: np.dtype) -> tuple[str, ...]:
+    """Field names of a structured dtype (every layout here is one)."""
+    if dtype.names is None:
+        raise TypeError(f"{dtype} is not a structured dtype")
+    return dtype.names
 
 
 def pack_points(xyz: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
@@ -66,7 +74,7 @@ def pack_field(xyz: np.ndarray, dxyz: np.ndarray, rows: np.ndarray, cols: np.nda
     if not np.isfinite(dxyz).all():
         raise CloudFormatError("non-finite displacements (the cloud must be dense)")
     out = np.empty(len(points), dtype=FIELD_DTYPE if force is None else FIELD_FORCE_DTYPE)
-    for name in POINT_DTYPE.names:
+    for name in _names(POINT_DTYPE):
         out[name] = points[name]
     out["dx"], out["dy"], out["dz"] = dxyz[:, 0], dxyz[:, 1], dxyz[:, 2]
     if force is not None:
@@ -82,8 +90,9 @@ def pack_field(xyz: np.ndarray, dxyz: np.ndarray, rows: np.ndarray, cols: np.nda
 def _point_fields(dtype: np.dtype) -> list[dict[str, Any]]:
     """PointField dicts of a packed little-endian structured dtype (one value per field)."""
     out = []
-    for name in dtype.names:
-        sub, offset = dtype.fields[name][:2]
+    fields: Mapping[str, tuple[Any, ...]] = dtype.fields or {}
+    for name in _names(dtype):
+        sub, offset = fields[name][:2]
         code = sub.str[1:]
         if sub.byteorder == ">" or code not in _DATATYPE_OF_NUMPY:
             raise CloudFormatError(f"field {name!r} has no PointField type ({sub})")
@@ -125,7 +134,8 @@ def cloud_to_arrays(msg: Any, dtype: np.dtype = POINT_DTYPE) -> np.ndarray:
         offset = field["offset"] if isinstance(field, dict) else field.offset
         datatype = field["datatype"] if isinstance(field, dict) else field.datatype
         names[name] = (offset, datatype)
-    missing = [n for n in dtype.names if n not in names]
+    wanted = _names(dtype)
+    missing = [n for n in wanted if n not in names]
     if missing:
         raise CloudFormatError(f"PointCloud2 lacks field(s) {', '.join(missing)}")
     count = int(msg.width) * int(msg.height)
@@ -136,12 +146,12 @@ def cloud_to_arrays(msg: Any, dtype: np.dtype = POINT_DTYPE) -> np.ndarray:
     if raw.size < count * step:
         raise CloudFormatError(f"PointCloud2 data has {raw.size} bytes, expected {count * step}")
     endian = ">" if msg.is_bigendian else "<"
-    layout = np.dtype({"names": list(dtype.names),
-                       "formats": [endian + _NUMPY_OF_DATATYPE[names[n][1]] for n in dtype.names],
-                       "offsets": [names[n][0] for n in dtype.names],
+    layout = np.dtype({"names": list(wanted),
+                       "formats": [endian + _NUMPY_OF_DATATYPE[names[n][1]] for n in wanted],
+                       "offsets": [names[n][0] for n in wanted],
                        "itemsize": step})
     view = np.frombuffer(raw[: count * step].tobytes(), dtype=layout)
     out = np.empty(count, dtype=dtype)
-    for name in dtype.names:
+    for name in wanted:
         out[name] = view[name]
     return out

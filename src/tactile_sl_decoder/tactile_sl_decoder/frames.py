@@ -76,14 +76,15 @@ def bag_frames(path: str | Path, namespace: str = "/tactile",
                                right_info, parts.get("ground_truth"))
 
     for raw, msg in reader.messages(wanted):
-        stamp = tuple(int(x) for x in header_stamp_of_cdr(raw.data))
+        sec, nanosec = header_stamp_of_cdr(raw.data)
+        stamp = (int(sec), int(nanosec))
         # log time = stamp in our bags, but be tolerant: only flush frames well behind.
         yield from flush(_minus(stamp, 1))
         pending.setdefault(stamp, {})[part_of[raw.topic]] = msg
     yield from flush(None)
 
 
-def _minus(stamp: tuple[int, ...], seconds: int) -> tuple[int, int]:
+def _minus(stamp: tuple[int, int], seconds: int) -> tuple[int, int]:
     return (stamp[0] - seconds, stamp[1])
 
 

@@ -67,8 +67,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"\ntactile-sl synth: scene {scene.name}: {exc}", file=sys.stderr)
             return 1
         path = out / f"{scene.name}.mcap"
-        write_scene_bag(scene, renderer, path, namespace=args.namespace,
-                        on_frame=lambda _i, name=scene.name: progress.update(1, name))
+
+        def frame_done(_index: int, name: str = scene.name) -> None:
+            progress.update(1, name)
+
+        write_scene_bag(scene, renderer, path, namespace=args.namespace, on_frame=frame_done)
         print(f"{path}: {scene.frames} frames, {os.path.getsize(path) / 1e6:.2f} MB",
               file=sys.stderr)
     return 0

@@ -139,9 +139,9 @@ def _glyph_mask(value: int, size: int, supersample: int = 4) -> np.ndarray:
         cv2.circle(canvas, (int(c), int(c)), int(0.06 * n * (value // 3)), 0 if kind else 255, -1)
     ys, xs = np.nonzero(canvas)
     dy, dx = c - ys.mean() - 0.5, c - xs.mean() - 0.5  # move the ink centroid to the centre
-    M = np.float32([[1, 0, dx], [0, 1, dy]])
-    canvas = cv2.warpAffine(canvas, M, (n, n), flags=cv2.INTER_LINEAR)
-    return cv2.resize(canvas, (size, size), interpolation=cv2.INTER_AREA)
+    M = np.array([[1, 0, dx], [0, 1, dy]], dtype=np.float32)
+    centred = cv2.warpAffine(canvas, M, (n, n), flags=cv2.INTER_LINEAR)
+    return cv2.resize(centred, (size, size), interpolation=cv2.INTER_AREA)
 
 
 def draw_artwork(values: np.ndarray, pitch_px: int = 40, pitch_m: float = 0.0005,

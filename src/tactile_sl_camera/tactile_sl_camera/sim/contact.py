@@ -22,13 +22,15 @@ surface: rendering and ground truth both sample it.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
 
 from ..elasticity import surface_displacement
-from .loads import is_load, load_traction
+from .loads import LoadContact, is_load, load_traction
 
 KINDS = ("sphere", "cylinder", "edge", "flat")
 
@@ -140,13 +142,13 @@ class FieldGrid:
     spacing: float = 4e-5
     nx: int = 626
     ny: int = 501
-    data: np.ndarray = field(default=None)  # type: ignore[assignment]  # (ny, nx, 3) float64
-    slope: np.ndarray = field(default=None)  # type: ignore[assignment]  # (ny, nx, 2) dw/dX, dw/dY
     traction: np.ndarray | None = None  # (ny, nx, 3) Pa of the load contacts, None without
+    data: np.ndarray = field(init=False)  # (ny, nx, 3) float64 displacement, zero until built
+    slope: np.ndarray = field(init=False)  # (ny, nx, 2) dw/dX, dw/dY, zero until built
 
     def __post_init__(self) -> None:
-        if self.data is None:
-            self.data = np.zeros((self.ny, self.nx, 3))
+        self.data = np.zeros((self.ny, self.nx, 3))
+        self.slope = np.zeros((self.ny, self.nx, 2))
         self.active_box: tuple[float, float, float, float] | None = None
         self.active_index: tuple[int, int, int, int] | None = None
         self._data32: np.ndarray | None = None
@@ -162,7 +164,8 @@ class FieldGrid:
         return self.y0 + self.spacing * np.arange(self.ny)
 
     @classmethod
-    def build(cls, contacts: list, pad: PadParams, **grid: float) -> "FieldGrid":
+    def build(cls, contacts: Sequence[Contact | LoadContact], pad: PadParams,
+              **grid: Any) -> "FieldGrid":
         """Tabulate the superposed displacement of all contacts (indenters and loads)."""
         g = cls(**grid)
         xs, ys = g.xs, g.ys
@@ -201,7 +204,6 @@ class FieldGrid:
             idx = i if idx is None else (min(idx[0], i[0]), max(idx[1], i[1]),
                                          min(idx[2], i[2]), max(idx[3], i[3]))
         g.active_box = box
-        g.slope = np.zeros((g.ny, g.nx, 2))
         if idx is not None:  # the field is exactly zero outside the contacts' boxes
             iy0, iy1 = max(idx[0] - 1, 0), min(idx[1] + 1, g.ny)
             ix0, ix1 = max(idx[2] - 1, 0), min(idx[3] + 1, g.nx)

@@ -18,12 +18,17 @@ inverts), so a decoder that inverts them correctly recovers the loads.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import ndimage
 
 from ..elasticity import Elastomer
+
+if TYPE_CHECKING:  # typing.TypeIs is Python 3.13; annotations are not evaluated at run time
+    from typing_extensions import TypeIs
 
 PROFILES = ("hertz", "uniform")
 DEFAULT_ELASTOMER = Elastomer(youngs_modulus=3.0e5, poisson_ratio=0.49, thickness=0.0)
@@ -107,7 +112,7 @@ class LoadContact:
         return out
 
 
-def is_load(contact: object) -> bool:
+def is_load(contact: object) -> TypeIs[LoadContact]:
     return isinstance(contact, LoadContact)
 
 
@@ -170,7 +175,7 @@ def resultant(loads: list[LoadContact]) -> tuple[np.ndarray, np.ndarray]:
     return force, moment
 
 
-def touch_truth(contacts: list[object], traction: np.ndarray, uz: np.ndarray, xs: np.ndarray,
+def touch_truth(contacts: Sequence[object], traction: np.ndarray, uz: np.ndarray, xs: np.ndarray,
                 ys: np.ndarray, spacing: float, cell_rest: tuple[np.ndarray, np.ndarray],
                 visible: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> TouchTruth:
     """Ground truth of a frame from its contacts and the field grid's traction and uz.

@@ -16,6 +16,7 @@ applied in the physical order: scene radiance, optics (occluders, blur, vignetti
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -250,8 +251,8 @@ def _object_pattern(kind: str, shape: tuple[int, int], scale_px: float,
     if kind == "noise":
         step = max(scale_px / 2.0, 1.0)
         small = rng.standard_normal((int(h / step) + 2, int(w / step) + 2)).astype(np.float32)
-        small = cv2.GaussianBlur(small, (0, 0), 0.7)
-        big = cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
+        blurred = cv2.GaussianBlur(small, (0, 0), 0.7)
+        big = cv2.resize(blurred, (w, h), interpolation=cv2.INTER_CUBIC)
         thr = np.percentile(big, 80)
         return np.clip((big - thr) / (0.5 * float(big.std()) + 1e-6), 0.0, 1.0)
     if kind == "text":
@@ -299,21 +300,22 @@ class Renderer:
         self._tex_by = float(p00[1])
         self._tex_flat = [(t.X0_ss * self._tex_ax + self._tex_bx,
                            t.Y0_ss * self._tex_ay + self._tex_by) for t in self._tables]
-        self._cache: dict[Any, np.ndarray] = {}
+        # arrays and tuples of arrays, keyed by what they are (first item) and their inputs
+        self._cache: dict[tuple[Any, ...], Any] = {}
 
     # ------------------------------------------------------------------ geometry
 
     def cell_rest_positions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(rows, cols, X, Y) of every cell centre on the undeformed pad (pad frame)."""
-        rows, cols = np.meshgrid(np.arange(self.artwork.rows), np.arange(self.artwork.cols),
-                                 indexing="ij")
-        rows, cols = rows.reshape(-1), cols.reshape(-1)
+        row_grid, col_grid = np.meshgrid(np.arange(self.artwork.rows),
+                                         np.arange(self.artwork.cols), indexing="ij")
+        rows, cols = row_grid.reshape(-1), col_grid.reshape(-1)
         sx = -1.0 if self.mirrored else 1.0
         X = sx * (cols - self.uc) * self.pitch
         Y = (rows - self.vc) * self.pitch
         return rows, cols, X, Y
 
-    def build_field(self, contacts: list[Contact]) -> FieldGrid:
+    def build_field(self, contacts: Sequence[Contact | LoadContact]) -> FieldGrid:
         return FieldGrid.build(contacts, self.pad, **self.grid)
 
     def _cast(self, table: _RayTable, fld: FieldGrid
@@ -627,7 +629,7 @@ class Renderer:
             albedo, seen = tex3[:, :, 0], tex3[:, :, 1:]
         E = E * self._shadow_factor(X, Y, nz)
         channels = 3 if color else 1
-        out = np.empty((h, w, channels), np.float32)
+        out: np.ndarray = np.empty((h, w, channels), np.float32)  # cv2 filters replace it
         for c in range(channels):
             ink = nz.ink[c] if color else float(np.mean(nz.ink))
             paper = nz.paper[c] if color else float(np.mean(nz.paper))
@@ -748,7 +750,7 @@ class Renderer:
 
     # ------------------------------------------------------------------ frames
 
-    def touch_truth(self, contacts: list[Contact | LoadContact], fld: FieldGrid,
+    def touch_truth(self, contacts: Sequence[Contact | LoadContact], fld: FieldGrid,
                     truth: GroundTruth) -> TouchTruth:
         """Force, contact and per-cell displacement truth of a frame (pad frame)."""
         if self.mirrored:
@@ -759,7 +761,8 @@ class Renderer:
         return touch_truth(contacts, traction, fld.data[:, :, 2], fld.xs, fld.ys, fld.spacing,
                            (X, Y), (rows[v], cols[v], truth.world[v], fld.sample(X[v], Y[v])))
 
-    def render(self, contacts: list[Contact | LoadContact], nuisances: Nuisances | None = None,
+    def render(self, contacts: Sequence[Contact | LoadContact],
+               nuisances: Nuisances | None = None,
                seed: int = 0, frame_index: int = 0, color: bool = False) -> StereoFrame:
         """Render one stereo frame and its ground truth (deterministic for seed, frame).
 

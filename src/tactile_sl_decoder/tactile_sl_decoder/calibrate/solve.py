@@ -136,10 +136,10 @@ def write_atomically(directory: str | os.PathLike, files: dict[str, bytes]
     temps: list[tuple[str, pathlib.Path]] = []
     try:
         for name, data in files.items():
-            fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=d)
+            fd, tmp_name = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=d)
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
-            temps.append((name, pathlib.Path(tmp)))
+            temps.append((name, pathlib.Path(tmp_name)))
         out = []
         for name, tmp in temps:
             os.replace(tmp, d / name)
@@ -198,8 +198,11 @@ def _calibrate_camera(obj_all: list[np.ndarray], img_all: list[np.ndarray],
         obj = [o[k].astype(np.float32) for o, k in zip(obj_all, keep)]
         img = [i[k].astype(np.float32).reshape(-1, 1, 2) for i, k in zip(img_all, keep)]
         try:
+            # cv2's stub requires arrays for K and D; None makes OpenCV allocate them (its
+            # stub for calibrateCamera allows None for the same output arguments)
             rms, K, D, rvecs, tvecs, std, _se, per_view = cv2.calibrateCameraExtended(
-                obj, img, size, None, None, flags=flags, criteria=CRITERIA)
+                obj, img, size, None, None, flags=flags,  # type: ignore[call-overload]
+                criteria=CRITERIA)
         except cv2.error as exc:
             raise CalibrationError(
                 f"{side} camera: OpenCV could not calibrate ({exc.err}); the views are "
@@ -389,12 +392,12 @@ def coverage_image(cal: PatternCalibration, scale: float = 0.5, bins: tuple[int,
     for side, pts, cam in (("left", cal.points_left, cal.left), ("right", cal.points_right,
                                                                  cal.right)):
         w, h = int(round(cam.width * scale)), int(round(cam.height * scale))
-        acc = np.zeros((h, w), np.float32)
+        acc: np.ndarray = np.zeros((h, w), np.float32)
         if len(pts):
             xy = np.clip(np.rint(pts * scale).astype(np.int64), 0, [w - 1, h - 1])
             np.add.at(acc, (xy[:, 1], xy[:, 0]), 1.0)
         acc = cv2.GaussianBlur(acc, (0, 0), 3.0)
-        norm = np.uint8(255 * np.sqrt(acc / max(float(acc.max()), 1e-9)))
+        norm = (255 * np.sqrt(acc / max(float(acc.max()), 1e-9))).astype(np.uint8)
         img = cv2.applyColorMap(norm, cv2.COLORMAP_VIRIDIS)
         img[acc <= 0] = (40, 40, 40)
         hist = np.histogram2d(pts[:, 0], pts[:, 1], bins=bins,

@@ -56,7 +56,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except (OSError, MemoryError) as exc:     # last resort: one line, never a traceback
         text = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
-        where = f" {exc.filename}:" if getattr(exc, "filename", None) else ""
+        filename = getattr(exc, "filename", None)   # MemoryError has none
+        where = f" {filename}:" if filename else ""
         print(f"tactile-sl {args.command}:{where} {text}", file=sys.stderr)
         return 1
 

@@ -18,9 +18,12 @@ from __future__ import annotations
 import argparse
 import pathlib
 import sys
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from tactile_sl_decoder.cli.argtypes import number
+
+if TYPE_CHECKING:  # the modes import numpy themselves, so that --help stays fast
+    import numpy as np
 
 PROG = "tactile-sl calibrate"
 
@@ -383,7 +386,7 @@ def _run_force(args: argparse.Namespace) -> int:
     params = PipelineParams()
     params.decode.mirrored = bool(args.mirrored)
     pipeline = StereoPipeline(pattern, None, params)
-    frames = []
+    frames: list[np.ndarray] = []
     try:
         for frame in bag_frames(args.bag, "/tactile", ground_truth=False):
             if frame.left_info is None or frame.right_info is None:

@@ -238,9 +238,9 @@ class _Layout:
         self.H, self.W = self.rows + 2, self.cols + 2
         self.size = self.groups * self.H * self.W
         self.delta = _DR * self.W + _DC                      # (8,) offsets of the neighbours
-        self.valid = np.zeros((self.groups, self.H, self.W), dtype=bool)
-        self.valid[:, 1:-1, 1:-1] = True
-        self.valid = self.valid.reshape(-1)
+        valid = np.zeros((self.groups, self.H, self.W), dtype=bool)
+        valid[:, 1:-1, 1:-1] = True
+        self.valid = valid.reshape(-1)
         # valid, plus W + 2 False entries: the "implied cell" -1 - delta of an unknown
         # neighbour (-W - 2 .. W) then indexes padding or that tail, never a valid cell.
         self.valid_ext = np.concatenate([self.valid, np.zeros(self.W + 2, dtype=bool)])

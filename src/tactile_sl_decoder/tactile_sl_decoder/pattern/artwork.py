@@ -119,9 +119,9 @@ def render_array(pattern: Pattern, pitch_px: float, margin_pitch: float = DEFAUL
                 ink[ys, xs], tile[ys.start - y0:ys.stop - y0, xs.start - x0:xs.stop - x0])
     # orientation mark, area-sampled the same way
     yy, xx = np.mgrid[0:height, 0:width]
-    for x0, y0, x1, y1 in _mark_rects():
-        px0, px1 = origin + x0 * pitch_px, origin + x1 * pitch_px
-        py0, py1 = origin + y0 * pitch_px, origin + y1 * pitch_px
+    for mark_x0, mark_y0, mark_x1, mark_y1 in _mark_rects():
+        px0, px1 = origin + mark_x0 * pitch_px, origin + mark_x1 * pitch_px
+        py0, py1 = origin + mark_y0 * pitch_px, origin + mark_y1 * pitch_px
         cov_x = np.clip(np.minimum(xx + 0.5, px1) - np.maximum(xx - 0.5, px0), 0, 1)
         cov_y = np.clip(np.minimum(yy + 0.5, py1) - np.maximum(yy - 0.5, py0), 0, 1)
         ink = np.maximum(ink, (cov_x * cov_y).astype(np.float32))
@@ -180,13 +180,12 @@ def render_png(pattern: Pattern, path: str | Path, dpi: float | None = None,
 
     Give either ``dpi`` (physical print resolution) or ``pitch_px`` (pixels per pitch).
     """
-    if (dpi is None) == (pitch_px is None):
-        raise ValueError("give exactly one of dpi or pitch_px")
-    if dpi is not None:
+    if dpi is not None and pitch_px is None:
         pitch_px = pattern.pitch_m * 1000.0 / MM_PER_INCH * dpi
-    else:
+    elif pitch_px is not None and dpi is None:
         dpi = pitch_px / (pattern.pitch_m * 1000.0 / MM_PER_INCH)
-    assert pitch_px is not None
+    else:
+        raise ValueError("give exactly one of dpi or pitch_px")
     image, facts = render_array(pattern, pitch_px, margin_pitch, supersample)
     write_png(image, path, dpi)
     sidecar = {

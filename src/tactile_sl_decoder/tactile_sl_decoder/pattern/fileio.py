@@ -204,9 +204,9 @@ def dump_pattern(pattern: Pattern) -> str:
             flow = yaml.safe_dump(value, default_flow_style=True, width=4096).strip()
             lines.append(f"{key}: {flow}")
         else:
-            flow = None if isinstance(value, (dict, list)) else False
-            lines.append(yaml.safe_dump({key: value}, sort_keys=False, default_flow_style=flow,
-                                        width=4096).rstrip("\n"))
+            flow_style = None if isinstance(value, (dict, list)) else False
+            lines.append(yaml.safe_dump({key: value}, sort_keys=False,
+                                        default_flow_style=flow_style, width=4096).rstrip("\n"))
     return "\n".join(lines) + "\n"
 
 

@@ -108,7 +108,7 @@ def score_image(u: np.ndarray, v: np.ndarray, spacing: float, truth_px: np.ndarr
     out.found = int((dist_t < tol).sum())
     # ground-truth region: convex hull of the true centres, grown by half a spacing
     h, w = image_shape
-    region = np.zeros((h, w), np.uint8)
+    region: np.ndarray = np.zeros((h, w), np.uint8)
     hull = cv2.convexHull(np.round(truth_px).astype(np.int32))
     cv2.fillConvexPoly(region, hull, 255)
     grow = max(1, int(round(0.5 * (spacing if spacing > 0 else 18.0))))

@@ -110,7 +110,7 @@ def finish(cover: np.ndarray, rng: np.random.Generator, *, blur: float = 0.8,
            paper: float = 200.0) -> np.ndarray:
     """Grey image from coverage: optical blur, uneven illumination, sensor noise."""
     h, w = cover.shape
-    img = paper + (ink - paper) * cover
+    img: np.ndarray = paper + (ink - paper) * cover
     if blur > 0:
         img = cv2.GaussianBlur(img, (0, 0), blur)
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)

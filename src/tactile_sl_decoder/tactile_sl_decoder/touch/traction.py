@@ -91,7 +91,7 @@ class TractionSolver:
         # Resultant: rows sum fx, fy, fz and the moments r x f about the pad origin (z = 0).
         x = (self.cols - (self.shape[1] - 1) / 2.0) * pitch * (-1.0 if mirrored else 1.0)
         y = (self.rows - (self.shape[0] - 1) / 2.0) * pitch
-        s = np.zeros((6, n, 3))
+        s: np.ndarray = np.zeros((6, n, 3))  # per point, then flattened to (6, 3n)
         s[0, :, 0] = s[1, :, 1] = s[2, :, 2] = 1.0
         s[3, :, 2] = y                     # Mx = sum y fz
         s[4, :, 2] = -x                    # My = -sum x fz
@@ -161,7 +161,7 @@ class TractionSolver:
         core = press > threshold
         if wrench[2] >= 0.0 or not core.any():   # nothing presses overall: no contact map
             return forces, wrench
-        grid = np.zeros(self.shape, np.uint8)
+        grid: np.ndarray = np.zeros(self.shape, np.uint8)
         grid[self.rows[core], self.cols[core]] = 1
         grid = cv2.dilate(grid, np.ones((3, 3), np.uint8))
         keep = np.flatnonzero(grid[self.rows, self.cols].astype(bool) & (press > 0.0))

@@ -81,7 +81,8 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
         while 0 <= pos < total_cells:
             r, c = order[pos]
             win = closes[pos]
-            if cands[pos] is None:
+            cand = cands[pos]
+            if cand is None:
                 if win is None:
                     cand = rng.permutation(values)
                 else:
@@ -93,7 +94,6 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
                     cand = rng.permutation(values[ok])
                 cands[pos] = cand
                 ptr[pos] = 0
-            cand = cands[pos]
             if ptr[pos] < len(cand):
                 array[r, c] = cand[ptr[pos]]
                 ptr[pos] += 1
@@ -115,8 +115,8 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
             cands[pos] = None
             pos -= 1
             backtracks += 1
-            if pos >= 0 and closes[pos] is not None:
-                r0, c0 = closes[pos]
+            if pos >= 0 and (closed := closes[pos]) is not None:
+                r0, c0 = closed
                 index.remove(array[r0:r0 + m, c0:c0 + n].reshape(-1))
                 placed_windows -= 1
             if backtracks > limit or budget.expired():

@@ -176,11 +176,11 @@ def m_sequence(f: tuple[int, ...], q: int) -> np.ndarray:
             s.append(sum(coef * s[t + i] for i, coef in taps) % q)
         return np.asarray(s[:period], dtype=np.uint8)
     add, mul = F.add, F.mul
-    taps = [(i, mul[F.neg[c]]) for i, c in enumerate(f[:d]) if c]
+    row_taps = [(i, mul[F.neg[c]]) for i, c in enumerate(f[:d]) if c]  # (i, row of -f_i in mul)
     s = [0] * (d - 1) + [1]
     for t in range(period - d):
         acc = 0
-        for i, row in taps:
+        for i, row in row_taps:
             acc = add[acc][row[s[t + i]]]
         s.append(acc)
     return np.asarray(s[:period], dtype=np.uint8)
