@@ -571,8 +571,9 @@ class Renderer:
             self._cache[key] = 1.0 - cv2.GaussianBlur(mask, (0, 0), 0.7)
         return self._cache[key]
 
-    def render_camera(self, index: int, fld: FieldGrid, nz: Nuisances, rng: np.random.Generator,
-                      exposure: float, color: bool, seed: int = 0) -> np.ndarray:
+    def render_camera(  # noqa: C901 - the nuisances, one pass in a fixed order
+            self, index: int, fld: FieldGrid, nz: Nuisances, rng: np.random.Generator,
+            exposure: float, color: bool, seed: int = 0) -> np.ndarray:
         """One camera's image (uint8, grey or BGR); ``seed`` fixes print damage and dust."""
         cam = self.rig.cameras[index]
         table = self._tables[index]

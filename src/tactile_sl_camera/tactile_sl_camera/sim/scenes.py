@@ -210,19 +210,7 @@ def parse_scene(doc: dict[str, Any], where: str = "scene") -> Scene:
     if not name or any(c in name for c in "/\\ "):
         raise SceneError(f"{where}: needs a name usable as a file name")
     _check_keys(doc, SCENE_KEYS, where)
-    el_doc = doc.get("elastomer") or {}
-    if not isinstance(el_doc, dict):
-        raise SceneError(f"{where}: elastomer must be a mapping "
-                         f"({', '.join(sorted(ELASTOMER_KEYS))})")
-    _check_keys(el_doc, ELASTOMER_KEYS, f"{where} elastomer")
-    try:
-        defaults = DEFAULT_ELASTOMER
-        elastomer = Elastomer(
-            youngs_modulus=float(el_doc.get("youngs_modulus", defaults.youngs_modulus)),
-            poisson_ratio=float(el_doc.get("poisson_ratio", defaults.poisson_ratio)),
-            thickness=float(el_doc.get("thickness", defaults.thickness)))
-    except (TypeError, ValueError) as exc:
-        raise SceneError(f"{where} elastomer: {exc}") from exc
+    elastomer = _parse_elastomer(doc.get("elastomer") or {}, where)
     try:
         scene = Scene(
             name=name, frames=int(doc.get("frames", 1)), fps=float(doc.get("fps", 10.0)),
@@ -241,40 +229,60 @@ def parse_scene(doc: dict[str, Any], where: str = "scene") -> Scene:
     if scene.encoding not in ("mono8", "bgr8"):
         raise SceneError(f"{where}: encoding must be mono8 or bgr8, not {scene.encoding!r}")
     for i, c in enumerate(doc.get("contacts") or []):
-        cw = f"{where} contact {i}"
-        if not isinstance(c, dict) or "indenter" not in c:
-            raise SceneError(f"{cw}: needs an indenter mapping and keyframes")
-        _check_keys(c, {"indenter", "keyframes"}, cw)
-        if not isinstance(c["indenter"], dict):
-            raise SceneError(f"{cw}: indenter must be a mapping")
-        load = c["indenter"].get("kind") == "load"
-        _check_keys(c["indenter"], LOAD_KEYS if load else INDENTER_KEYS, f"{cw} indenter")
-        if load and c["indenter"].get("profile", "hertz") not in PROFILES:
-            raise SceneError(f"{cw} indenter: profile must be one of {', '.join(PROFILES)}, "
-                             f"not {c['indenter'].get('profile')!r}")
-        if load and scene.mirrored:
-            raise SceneError(f"{cw}: load contacts need mirrored: false (their ground truth "
-                             "is in the pad frame, which a mirrored view would flip)")
-        kfs = c.get("keyframes") or [{"frame": 0}]
-        for kf in kfs:
-            if not isinstance(kf, dict):
-                raise SceneError(f"{cw}: every keyframe must be a mapping")
-            _check_keys(kf, LOAD_KEYFRAME_KEYS if load else KEYFRAME_KEYS, f"{cw} keyframe")
-            if "frame" not in kf:
-                raise SceneError(f"{cw}: every keyframe needs a frame index")
-        frames = [int(k["frame"]) for k in kfs]
-        if frames != sorted(frames) or len(set(frames)) != len(frames):
-            raise SceneError(f"{cw}: keyframe frames must increase strictly")
-        track = ContactTrack(dict(c["indenter"]), list(kfs))
-        try:
-            for f in range(scene.frames):
-                state = track.at(f, scene.elastomer)
-                if isinstance(state, LoadContact):
-                    _check_on_grid(state, f)
-        except (TypeError, ValueError) as exc:
-            raise SceneError(f"{cw}: {exc}") from exc
-        scene.contacts.append(track)
+        scene.contacts.append(_parse_contact(c, scene, f"{where} contact {i}"))
     return scene
+
+
+def _parse_elastomer(el_doc: Any, where: str) -> Elastomer:
+    """The scene's elastomer mapping (missing keys from DEFAULT_ELASTOMER)."""
+    if not isinstance(el_doc, dict):
+        raise SceneError(f"{where}: elastomer must be a mapping "
+                         f"({', '.join(sorted(ELASTOMER_KEYS))})")
+    _check_keys(el_doc, ELASTOMER_KEYS, f"{where} elastomer")
+    try:
+        defaults = DEFAULT_ELASTOMER
+        return Elastomer(
+            youngs_modulus=float(el_doc.get("youngs_modulus", defaults.youngs_modulus)),
+            poisson_ratio=float(el_doc.get("poisson_ratio", defaults.poisson_ratio)),
+            thickness=float(el_doc.get("thickness", defaults.thickness)))
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"{where} elastomer: {exc}") from exc
+
+
+def _parse_contact(contact: Any, scene: Scene, where: str) -> ContactTrack:
+    """One contact mapping of a scene, checked in every frame of the scene."""
+    if not isinstance(contact, dict) or "indenter" not in contact:
+        raise SceneError(f"{where}: needs an indenter mapping and keyframes")
+    _check_keys(contact, {"indenter", "keyframes"}, where)
+    if not isinstance(contact["indenter"], dict):
+        raise SceneError(f"{where}: indenter must be a mapping")
+    load = contact["indenter"].get("kind") == "load"
+    _check_keys(contact["indenter"], LOAD_KEYS if load else INDENTER_KEYS, f"{where} indenter")
+    if load and contact["indenter"].get("profile", "hertz") not in PROFILES:
+        raise SceneError(f"{where} indenter: profile must be one of {', '.join(PROFILES)}, "
+                         f"not {contact['indenter'].get('profile')!r}")
+    if load and scene.mirrored:
+        raise SceneError(f"{where}: load contacts need mirrored: false (their ground truth "
+                         "is in the pad frame, which a mirrored view would flip)")
+    kfs = contact.get("keyframes") or [{"frame": 0}]
+    for kf in kfs:
+        if not isinstance(kf, dict):
+            raise SceneError(f"{where}: every keyframe must be a mapping")
+        _check_keys(kf, LOAD_KEYFRAME_KEYS if load else KEYFRAME_KEYS, f"{where} keyframe")
+        if "frame" not in kf:
+            raise SceneError(f"{where}: every keyframe needs a frame index")
+    frames = [int(k["frame"]) for k in kfs]
+    if frames != sorted(frames) or len(set(frames)) != len(frames):
+        raise SceneError(f"{where}: keyframe frames must increase strictly")
+    track = ContactTrack(dict(contact["indenter"]), list(kfs))
+    try:
+        for f in range(scene.frames):
+            state = track.at(f, scene.elastomer)
+            if isinstance(state, LoadContact):
+                _check_on_grid(state, f)
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"{where}: {exc}") from exc
+    return track
 
 
 def load_scenes(path: str | os.PathLike) -> list[Scene]:

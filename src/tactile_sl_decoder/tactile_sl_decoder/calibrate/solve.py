@@ -238,25 +238,14 @@ def _tilt_spread_deg(rvecs: list[np.ndarray]) -> float:
 # --------------------------------------------------------------------------- stereo
 
 
-def calibrate_pattern_stereo(views: list[StereoView], target: PatternTarget,
-                             options: CalibrationOptions | None = None
-                             ) -> PatternCalibration:
-    """Calibrate the stereo pair from decoded views of the pattern; CalibrationError if not.
+def _usable_views(views: list[StereoView], target: PatternTarget, opts: CalibrationOptions,
+                  reports: list[ViewReport]
+                  ) -> tuple[dict[str, list[int]], dict[str, dict[int, np.ndarray]]]:
+    """Per camera, the views with enough cells on one plane and those cells' masks.
 
-    Views with too few cells or cells off one plane are skipped and reported.  Raises for too
-    few usable views, a degenerate set of poses, or views of mixed image sizes.
+    Fills ``reports[i].skipped`` for views neither camera can use; raises when a camera has
+    fewer than ``opts.min_views``.
     """
-    opts = options or CalibrationOptions()
-    if not views:
-        raise CalibrationError("no image pairs")
-    size = views[0].image_size
-    for v in views:
-        if v.image_size != size:
-            raise CalibrationError(f"view {v.name}: image size {v.image_size[0]}x"
-                                   f"{v.image_size[1]} differs from the first view's "
-                                   f"{size[0]}x{size[1]}")
-    reports = [ViewReport(v.name, len(v.left), len(v.right)) for v in views]
-    # 1. per camera: enough cells, one plane
     usable: dict[str, list[int]] = {"left": [], "right": []}
     masks: dict[str, dict[int, np.ndarray]] = {"left": {}, "right": {}}
     reasons: dict[int, list[str]] = {}
@@ -291,6 +280,47 @@ def calibrate_pattern_stereo(views: list[StereoView], target: PatternTarget,
             raise CalibrationError(
                 f"only {n} of {len(views)} views are usable in the {side} camera; need at "
                 f"least {opts.min_views}{hint}")
+    return usable, masks
+
+
+def _check_poses(fits: dict[str, _CameraFit], opts: CalibrationOptions
+                 ) -> tuple[float, tuple[float, float]]:
+    """(tilt spread in deg, relative focal std per camera); raises for degenerate poses."""
+    spread = min(_tilt_spread_deg(fits[s].rvecs) for s in ("left", "right"))
+    if spread < opts.min_tilt_spread_deg:
+        raise CalibrationError(
+            f"degenerate views: all view planes lie within {spread:.1f} deg of each other "
+            f"(need at least {opts.min_tilt_spread_deg:g}): Zhang's method needs the target "
+            "tilted in several directions (e.g. 20-35 deg left, right, up and down)")
+    std_f = tuple(float(max(fits[s].std[0] / fits[s].K[0, 0], fits[s].std[1] / fits[s].K[1, 1]))
+                  for s in ("left", "right"))
+    if max(std_f) > opts.max_focal_std:
+        raise CalibrationError(
+            f"degenerate views: the focal length is undetermined (std {100 * max(std_f):.2f} "
+            f"% > {100 * opts.max_focal_std:.2f} %); add views tilted in other directions")
+    return spread, (std_f[0], std_f[1])
+
+
+def calibrate_pattern_stereo(views: list[StereoView], target: PatternTarget,
+                             options: CalibrationOptions | None = None
+                             ) -> PatternCalibration:
+    """Calibrate the stereo pair from decoded views of the pattern; CalibrationError if not.
+
+    Views with too few cells or cells off one plane are skipped and reported.  Raises for too
+    few usable views, a degenerate set of poses, or views of mixed image sizes.
+    """
+    opts = options or CalibrationOptions()
+    if not views:
+        raise CalibrationError("no image pairs")
+    size = views[0].image_size
+    for v in views:
+        if v.image_size != size:
+            raise CalibrationError(f"view {v.name}: image size {v.image_size[0]}x"
+                                   f"{v.image_size[1]} differs from the first view's "
+                                   f"{size[0]}x{size[1]}")
+    reports = [ViewReport(v.name, len(v.left), len(v.right)) for v in views]
+    # 1. per camera: enough cells, one plane
+    usable, masks = _usable_views(views, target, opts, reports)
     # 2. each camera on its own
     fits: dict[str, _CameraFit] = {}
     for side in ("left", "right"):
@@ -306,18 +336,7 @@ def calibrate_pattern_stereo(views: list[StereoView], target: PatternTarget,
             setattr(reports[i], f"dropped_{side}", int((~m).sum() + (~fit.keep[j]).sum()))
             setattr(reports[i], f"rms_{side}", float(fit.per_view_rms[j]))
     # 3. degeneracy
-    spread = min(_tilt_spread_deg(fits[s].rvecs) for s in ("left", "right"))
-    if spread < opts.min_tilt_spread_deg:
-        raise CalibrationError(
-            f"degenerate views: all view planes lie within {spread:.1f} deg of each other "
-            f"(need at least {opts.min_tilt_spread_deg:g}): Zhang's method needs the target "
-            "tilted in several directions (e.g. 20-35 deg left, right, up and down)")
-    std_f = tuple(float(max(fits[s].std[0] / fits[s].K[0, 0], fits[s].std[1] / fits[s].K[1, 1]))
-                  for s in ("left", "right"))
-    if max(std_f) > opts.max_focal_std:
-        raise CalibrationError(
-            f"degenerate views: the focal length is undetermined (std {100 * max(std_f):.2f} "
-            f"% > {100 * opts.max_focal_std:.2f} %); add views tilted in other directions")
+    spread, std_f = _check_poses(fits, opts)
     # 4. stereo on the cells both cameras kept
     objs, pts_l, pts_r, stereo_ids = [], [], [], []
     for i, v in enumerate(views):
@@ -365,7 +384,7 @@ def calibrate_pattern_stereo(views: list[StereoView], target: PatternTarget,
                                      float(rms), fl.rms, fr.rms, len(objs), len(views))
     return PatternCalibration(result, reports, np.concatenate([p.reshape(-1, 2) for p in pts_l]),
                               np.concatenate([p.reshape(-1, 2) for p in pts_r]), spread,
-                              (std_f[0], std_f[1]), opts)
+                              std_f, opts)
 
 
 # --------------------------------------------------------------------------- coverage

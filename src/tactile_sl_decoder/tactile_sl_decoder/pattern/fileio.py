@@ -92,6 +92,34 @@ def _int_field(doc: dict[str, Any], key: str, source: str) -> int:
     return value
 
 
+def _array_field(array: Any, rows: int, cols: int, constraints: Constraints,
+                 source: str) -> np.ndarray:
+    """The ``array`` rows (digit strings) as a (rows, cols) uint8 grid, every cell checked."""
+    if not isinstance(array, list):
+        raise _fail(source, f"'array' must be a list of strings, got {type(array).__name__}")
+    if len(array) != rows:
+        raise _fail(source, f"'array' has {len(array)} rows but 'rows' says {rows}")
+    if rows < constraints.window[0] or cols < constraints.window[1]:
+        raise _fail(source, f"array {rows}x{cols} is smaller than the window "
+                            f"{constraints.window[0]}x{constraints.window[1]}")
+    grid = np.zeros((rows, cols), dtype=np.uint8)
+    for r, line in enumerate(array):
+        if isinstance(line, int) and not isinstance(line, bool):
+            raise _fail(source, f"array row {r} is a number, not a string: quote it "
+                                f"(\"{line}\") so leading zeros survive")
+        if not isinstance(line, str):
+            raise _fail(source, f"array row {r} must be a string, got {line!r}")
+        if len(line) != cols:
+            raise _fail(source, f"array row {r} has {len(line)} characters but 'cols' says "
+                                f"{cols} (ragged array)")
+        for c, ch in enumerate(line):
+            if not ch.isdigit() or int(ch) >= constraints.symbols:
+                raise _fail(source, f"array row {r} column {c} has symbol {ch!r}, "
+                                    f"outside 0..{constraints.symbols - 1}")
+        grid[r] = np.frombuffer(line.encode("ascii"), dtype=np.uint8) - ord("0")
+    return grid
+
+
 def pattern_from_dict(doc: Any, source: str = "<pattern>") -> Pattern:
     """Validate a parsed YAML document and build a :class:`Pattern`.
 
@@ -131,29 +159,7 @@ def pattern_from_dict(doc: Any, source: str = "<pattern>") -> Pattern:
         raise _fail(source, f"'primitives' lists {len(primitives)} names but symbols is {symbols}")
     if len(set(primitives)) != len(primitives):
         raise _fail(source, f"'primitives' has duplicate names: {primitives}")
-    array = doc["array"]
-    if not isinstance(array, list):
-        raise _fail(source, f"'array' must be a list of strings, got {type(array).__name__}")
-    if len(array) != rows:
-        raise _fail(source, f"'array' has {len(array)} rows but 'rows' says {rows}")
-    if rows < constraints.window[0] or cols < constraints.window[1]:
-        raise _fail(source, f"array {rows}x{cols} is smaller than the window "
-                            f"{constraints.window[0]}x{constraints.window[1]}")
-    grid = np.zeros((rows, cols), dtype=np.uint8)
-    for r, line in enumerate(array):
-        if isinstance(line, int) and not isinstance(line, bool):
-            raise _fail(source, f"array row {r} is a number, not a string: quote it "
-                                f"(\"{line}\") so leading zeros survive")
-        if not isinstance(line, str):
-            raise _fail(source, f"array row {r} must be a string, got {line!r}")
-        if len(line) != cols:
-            raise _fail(source, f"array row {r} has {len(line)} characters but 'cols' says "
-                                f"{cols} (ragged array)")
-        for c, ch in enumerate(line):
-            if not ch.isdigit() or int(ch) >= symbols:
-                raise _fail(source, f"array row {r} column {c} has symbol {ch!r}, "
-                                    f"outside 0..{symbols - 1}")
-        grid[r] = np.frombuffer(line.encode("ascii"), dtype=np.uint8) - ord("0")
+    grid = _array_field(doc["array"], rows, cols, constraints, source)
     extra = {key: value for key, value in doc.items() if key not in _REQUIRED}
     return Pattern(grid, constraints, float(pitch), list(primitives), extra)
 

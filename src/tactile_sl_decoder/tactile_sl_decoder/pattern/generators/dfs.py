@@ -44,9 +44,10 @@ def cell_order(rows: int, cols: int, window: tuple[int, int]) -> list[tuple[int,
     return order
 
 
-def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
-             time_limit: float | None = 60.0, progress: bool = False,
-             unit: int = DEFAULT_UNIT) -> GenerationResult:
+def generate(  # noqa: C901 - one backtracking search, its state shared by every step
+        constraints: Constraints, rows: int, cols: int, seed: int = 0,
+        time_limit: float | None = 60.0, progress: bool = False,
+        unit: int = DEFAULT_UNIT) -> GenerationResult:
     """Backtracking search with Luby restarts until the array is complete or time ends."""
     check_size(constraints, rows, cols)
     budget = Budget(time_limit, progress, NAME)

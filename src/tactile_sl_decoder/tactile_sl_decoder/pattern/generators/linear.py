@@ -267,6 +267,29 @@ def _best_offset(seq: np.ndarray, rows: int, cols: int, stride: int, transpose: 
     return best[1], best[2], best[3]
 
 
+def _candidate_folds(rows: int, cols: int, window: tuple[int, int], period: int,
+                     rng: np.random.Generator) -> list[tuple[int, bool]]:
+    """(stride, transpose) folds that keep the window exponents distinct, without repeats.
+
+    The smallest strides are the natural raster folds, then a seeded sample of the rest.
+    """
+    m, n = window
+    folds = []
+    for transpose in (False, True):
+        lo = (rows - m + 1) if transpose else (cols - n + 1)
+        other = (cols - n + 1) if transpose else (rows - m + 1)
+        natural = range(lo, min(lo + 8, period))
+        # strides lo*u (u a unit mod the other window count) tile the period exactly
+        # when lo*other == period: these are the folds that can use every codeword
+        tiling = [lo * u % period for u in range(1, other + 1)
+                  if math.gcd(u, other) == 1] if lo * other <= period else []
+        extra = rng.integers(lo, max(period, lo + 1), 24)
+        for stride in itertools.chain(tiling, natural, extra):
+            if _windows_distinct(rows, cols, window, int(stride), period, transpose):
+                folds.append((int(stride), transpose))
+    return list(dict.fromkeys(folds))
+
+
 def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
              time_limit: float | None = 60.0, progress: bool = False,
              tidy: bool = False) -> GenerationResult:
@@ -289,7 +312,6 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
     while p ** d - 1 < windows:
         d += 1
     tried = 0
-    m, n = constraints.window
     for degree in range(d, MAX_DEGREE + 1):
         period = p ** degree - 1
         if period > MAX_PERIOD:
@@ -299,23 +321,7 @@ def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
         polys = list(primitive_polynomials(p, degree, poly_limit))
         if not polys:
             continue
-        # fold strides that keep the window exponents distinct; the smallest are the
-        # natural raster folds, then a seeded sample of the rest
-        folds = []
-        for transpose in (False, True):
-            lo = (rows - m + 1) if transpose else (cols - n + 1)
-            other = (cols - n + 1) if transpose else (rows - m + 1)
-            natural = range(lo, min(lo + 8, period))
-            # strides lo*u (u a unit mod the other window count) tile the period exactly
-            # when lo*other == period: these are the folds that can use every codeword
-            tiling = [lo * u % period for u in range(1, other + 1)
-                      if math.gcd(u, other) == 1] if lo * other <= period else []
-            extra = rng.integers(lo, max(period, lo + 1), 24)
-            for stride in itertools.chain(tiling, natural, extra):
-                if _windows_distinct(rows, cols, constraints.window, int(stride), period,
-                                     transpose):
-                    folds.append((int(stride), transpose))
-        folds = list(dict.fromkeys(folds))
+        folds = _candidate_folds(rows, cols, constraints.window, period, rng)
         if not folds:
             continue
         combos = [(pi, fi) for pi in range(len(polys)) for fi in range(len(folds))]

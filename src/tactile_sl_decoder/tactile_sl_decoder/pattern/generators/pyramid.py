@@ -40,9 +40,10 @@ def _regions(filler: StepFiller, band: int) -> tuple[list[Step], list[list[Step]
     return base, [reg for reg in regions if reg]
 
 
-def generate(constraints: Constraints, rows: int, cols: int, seed: int = 0,
-             time_limit: float | None = 60.0, progress: bool = False,
-             band: int | None = None) -> GenerationResult:
+def generate(  # noqa: C901 - one search whose retry levels share the filler and counters
+        constraints: Constraints, rows: int, cols: int, seed: int = 0,
+        time_limit: float | None = 60.0, progress: bool = False,
+        band: int | None = None) -> GenerationResult:
     """Fill region by region with per-region retry budgets that climb on exhaustion."""
     check_size(constraints, rows, cols)
     budget = Budget(time_limit, progress, NAME)
