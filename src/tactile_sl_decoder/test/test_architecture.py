@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import pathlib
+import re
 
 import pytest
 
@@ -140,3 +141,112 @@ def test_contract_mirrors_the_symbol_array_message():
     msg = pytest.importorskip("tactile_sl_msgs.msg")
     assert contract.LABEL_UNKNOWN == msg.SymbolArray.LABEL_UNKNOWN
     assert contract.CELL_UNKNOWN == msg.SymbolArray.CELL_UNKNOWN
+
+
+REPO = PKG.parents[2]
+SOURCE_ROOTS = {"tactile_sl_decoder": REPO / "src" / "tactile_sl_decoder",
+                "tactile_sl_camera": REPO / "src" / "tactile_sl_camera"}
+DOTTED = re.compile(r"\btactile_sl_(?:decoder|camera|msgs)(?:\.[A-Za-z_]\w*)+")
+RELATIVE_MOD = re.compile(r":mod:`(\.+[A-Za-z_][\w.]*)`")   # :mod:`.solve` in a package module
+
+
+def _top_level_names(path: pathlib.Path) -> dict[str, ast.AST]:
+    """Names a module defines or imports at top level (classes keep their node)."""
+    names: dict[str, ast.AST] = {}
+    for node in ast.parse(path.read_text()).body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names[node.name] = node
+        elif isinstance(node, (ast.Import, ast.ImportFrom)):
+            names.update((alias.asname or alias.name.split(".")[0], node)
+                         for alias in node.names)
+        elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            names.update((t.id, node) for target in targets for t in ast.walk(target)
+                         if isinstance(t, ast.Name))
+    return names
+
+
+def dotted_name_exists(name: str) -> bool:
+    """Whether ``tactile_sl_*.a.b`` names a module, or a name a module defines (read, not run).
+
+    Messages: ``tactile_sl_msgs.msg.X`` needs ``src/tactile_sl_msgs/msg/X.msg``.
+    """
+    parts = name.split(".")
+    if parts[0] == "tactile_sl_msgs":
+        if parts[1:2] != ["msg"]:
+            return len(parts) == 1
+        return len(parts) == 2 or (REPO / "src/tactile_sl_msgs/msg" / f"{parts[2]}.msg").is_file()
+    root = SOURCE_ROOTS[parts[0]]
+    for k in range(len(parts), 0, -1):
+        base = root.joinpath(*parts[:k])
+        module = base / "__init__.py" if base.is_dir() else base.with_suffix(".py")
+        if module.is_file():
+            break
+    else:
+        return False
+    rest = parts[k:]
+    if not rest:
+        return True
+    node = _top_level_names(module).get(rest[0])
+    if node is None:
+        return False
+    if len(rest) > 1 and isinstance(node, ast.ClassDef):   # Class.member
+        members = {n.name for n in node.body if isinstance(n, (ast.FunctionDef, ast.ClassDef))}
+        members |= {t.id for n in node.body if isinstance(n, (ast.Assign, ast.AnnAssign))
+                    for t in (n.targets if isinstance(n, ast.Assign) else [n.target])
+                    if isinstance(t, ast.Name)}
+        return rest[1] in members
+    return True
+
+
+def _text_files() -> list[pathlib.Path]:
+    """Docs and Python sources, but not this file (its examples name missing things)."""
+    files = sorted(REPO.glob("*.md")) + sorted((REPO / "docs").rglob("*.md"))
+    for folder in ("src", "tests", "tools"):
+        files += sorted(p for p in (REPO / folder).rglob("*.py") if ".mypy_cache" not in p.parts)
+    return [p for p in files if p.resolve() != pathlib.Path(__file__).resolve()]
+
+
+def test_dotted_names_in_docs_comments_and_code_exist():
+    """Every ``tactile_sl_*.x.y`` written in docs, docstrings or comments names real code.
+
+    Modules move (the by-stage layout moved extraction, grid, stereo, ...); a stale path in a
+    docstring sends the reader nowhere.
+    """
+    bad = []
+    for path in _text_files():
+        package = _package_of(path)
+        for lineno, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+            names = DOTTED.findall(line)
+            if package:
+                names += [_absolute(rel, package) for rel in RELATIVE_MOD.findall(line)]
+            bad += [f"{path.relative_to(REPO)}:{lineno}: {name}"
+                    for name in names if not dotted_name_exists(name)]
+    assert not bad, "names that no module defines:\n" + "\n".join(bad)
+
+
+def _package_of(path: pathlib.Path) -> list[str]:
+    """Dotted package of a library module as a list ([] outside the packages)."""
+    for top, root in SOURCE_ROOTS.items():
+        if (root / top) in path.parents:
+            return list(path.relative_to(root).parent.parts)
+    return []
+
+
+def _absolute(relative: str, package: list[str]) -> str:
+    level = len(relative) - len(relative.lstrip("."))
+    return ".".join(package[:len(package) - level + 1] + [relative.lstrip(".")])
+
+
+def test_dotted_name_checker_tells_real_from_stale():
+    assert dotted_name_exists("tactile_sl_decoder.decode.grid")
+    assert dotted_name_exists("tactile_sl_decoder.pipeline.StereoPipeline.process")
+    assert dotted_name_exists("tactile_sl_camera.bag_io")
+    assert dotted_name_exists("tactile_sl_msgs.msg.SymbolArray")
+    assert not dotted_name_exists("tactile_sl_decoder.grid")          # moved to decode/
+    assert not dotted_name_exists("tactile_sl_decoder.pipeline.NoSuchThing")
+    assert not dotted_name_exists("tactile_sl_decoder.pipeline.StereoPipeline.no_such_method")
+    assert not dotted_name_exists("tactile_sl_msgs.msg.NoSuchMessage")
+    package = _package_of(PKG / "calibrate" / "solve.py")
+    assert _absolute(".health", package) == "tactile_sl_decoder.calibrate.health"
+    assert _absolute("..pipeline", package) == "tactile_sl_decoder.pipeline"

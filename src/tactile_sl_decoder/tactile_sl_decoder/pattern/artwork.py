@@ -1,7 +1,7 @@
 """Printable artwork: SVG in millimetres and PNG at a chosen resolution, plus a sidecar.
 
 The artwork is the printed pad (contract), so glyph geometry comes only from
-:mod:`.glyphs`. PNG pixels are area-sampled (``supersample``^2 points per pixel), so the
+:mod:`.shapes`. PNG pixels are area-sampled (``supersample``^2 points per pixel), so the
 grey-level ink centroid of every glyph lies on its cell centre to a small fraction of a
 pixel. Pixel convention of the sidecar: pixel (x, y) has its centre at (x, y), x right,
 y down (OpenCV); so cell (r, c) is at ``cell00_px + (c, r) * pitch_px``.
