@@ -12,17 +12,13 @@ import time
 from pathlib import Path
 
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 
-from ros_harness import REPO, next_domain_id, start_node, stop
+from ros_harness import BAGS, Probe, next_domain_id, start_node, stop
 
 pytestmark = pytest.mark.ros
 
-rclpy = pytest.importorskip("rclpy")
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-
-BAG = REPO / "bags" / "no_contact.mcap"
+BAG = BAGS / "no_contact.mcap"
 TASKS = {"input left", "input right", "processing", "coverage", "classifier",
          "touch reference", "calibration"}
 
@@ -39,15 +35,11 @@ def _swapped_info_bag(path: Path) -> Path:
     return path
 
 
-class Listener:
+class Listener(Probe):
     """Collects /diagnostics of one domain as {task: (level, message, values)}."""
 
     def __init__(self, domain: int, name: str) -> None:
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node(f"diagnostics_listener_{name}", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        super().__init__(f"diagnostics_listener_{name}", domain)
         self.arrays: list[dict[str, tuple[int, str, dict[str, str]]]] = []
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on, 10)
 
@@ -59,14 +51,6 @@ class Listener:
             got[task] = (s.level[0] if isinstance(s.level, bytes) else int(s.level),
                          s.message, {kv.key: kv.value for kv in s.values})
         self.arrays.append(got)
-
-    def spin(self) -> None:
-        self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
 
 
 def test_diagnostics_ok_on_a_good_bag_and_calibration_error_when_swapped(tmp_path):
@@ -95,7 +79,7 @@ def test_diagnostics_ok_on_a_good_bag_and_calibration_error_when_swapped(tmp_pat
         deadline = time.monotonic() + 45
         while time.monotonic() < deadline and not all(done(n) for n in listeners):
             for listener in listeners.values():
-                listener.spin()
+                listener.spin_once()
         logs = {p.name: p.read_text() for p in tmp_path.glob("*.log")}
         last = {n: (listeners[n].arrays[-1] if listeners[n].arrays else None)
                 for n in listeners}

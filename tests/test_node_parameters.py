@@ -7,16 +7,12 @@ from pathlib import Path
 
 import pytest
 import yaml
+from rclpy.parameter import Parameter, parameter_value_to_python
+from rclpy.parameter_client import AsyncParameterClient
 
-from ros_harness import REPO, next_domain_id, start_node, stop
+from ros_harness import REPO, Probe, next_domain_id, start_node, stop
 
 pytestmark = pytest.mark.ros
-
-rclpy = pytest.importorskip("rclpy")
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.parameter import Parameter, parameter_value_to_python  # noqa: E402
-from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
 
 CONFIGS = {  # config file -> (package, executable, extra -p overrides)
     "src/tactile_sl_camera/config/replay.yaml": ("tactile_sl_camera", "replay", "replay"),
@@ -31,15 +27,11 @@ CONFIGS = {  # config file -> (package, executable, extra -p overrides)
 }
 
 
-class Client:
+class Client(Probe):
     """A parameter client in its own context and domain."""
 
     def __init__(self, domain: int) -> None:
-        self.context = Context()
-        rclpy.init(context=self.context, domain_id=domain)
-        self.node = rclpy.create_node("param_test_client", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        super().__init__("param_test_client", domain)
 
     def wait(self, future, timeout: float = 20.0):
         deadline = time.monotonic() + timeout
@@ -63,11 +55,6 @@ class Client:
     def set(self, c: AsyncParameterClient, **values) -> list:
         params = [Parameter(k.replace("__", "."), value=v) for k, v in values.items()]
         return self.wait(c.set_parameters(params)).results
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
 
 
 def _bag(tmp_path: Path) -> Path:

@@ -9,20 +9,16 @@ from __future__ import annotations
 import time
 
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import PointCloud2
 
-from ros_harness import REPO, next_domain_id, start_node, stop
+from ros_harness import BAGS, Probe, next_domain_id, start_node, stop
 
 pytestmark = pytest.mark.ros
 
-rclpy = pytest.importorskip("rclpy")
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from sensor_msgs.msg import PointCloud2  # noqa: E402
-
-BAG = REPO / "bags" / "no_contact.mcap"
+BAG = BAGS / "no_contact.mcap"
 SENSORS = ("left_hand", "right_hand")
 
 
@@ -37,11 +33,8 @@ def test_two_sensors_in_two_namespaces_have_distinct_frames(tmp_path):
         procs.append(start_node("tactile_sl_camera", "replay", domain,
                                 [*ns, "-p", f"bag:={BAG}", "-p", "loop:=true",
                                  "-p", "rate:=0.5"], tmp_path / f"replay_{name}.log"))
-    context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    node = rclpy.create_node("several_sensors_test", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+    probe = Probe("several_sensors_test", domain)
+    node, executor = probe.node, probe.executor
     got: dict[str, set[str]] = {f"{n}/{kind}": set() for n in SENSORS
                                 for kind in ("points", "pad_pose", "wrench")}
     hardware: dict[str, str] = {}
@@ -75,8 +68,6 @@ def test_two_sensors_in_two_namespaces_have_distinct_frames(tmp_path):
             assert got[f"{name}/wrench"] == {f"{name}_tactile_pad"}
             assert hardware[f"{name}/decoder"] == name
     finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
+        probe.close()
         codes = [stop(p) for p in procs]
     assert codes == [0] * len(procs)

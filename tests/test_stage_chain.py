@@ -11,16 +11,13 @@ from __future__ import annotations
 import time
 
 import pytest
-import rclpy
-from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
 from tactile_sl_camera.bag_io import BagReader
 from tactile_sl_decoder.cli import main as tactile_sl
 
-from ros_harness import start_node, stop
+from ros_harness import Probe, start_node, stop
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -33,11 +30,8 @@ def test_chained_stage_nodes_equal_offline_replay(tmp_path, domain_id, repo):
                for _, m in BagReader(offline_bag).messages(["/tactile/points"])}
     assert len(offline) == 7
 
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node("chain_listener", namespace="/tactile", context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
+    probe = Probe("chain_listener", domain_id, namespace="/tactile")
+    node, executor = probe.node, probe.executor
     clouds: list[PointCloud2] = []
     node.create_subscription(PointCloud2, "points", clouds.append,
                              QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE))
@@ -85,9 +79,7 @@ def test_chained_stage_nodes_equal_offline_replay(tmp_path, domain_id, repo):
             executor.spin_once(timeout_sec=0.05)
     finally:
         codes = [stop(p) for p in reversed(procs)]
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.shutdown(context=context)
+        probe.close()
     assert codes[0] == 0, (tmp_path / "replay.log").read_text()
     online = {(c.header.stamp.sec, c.header.stamp.nanosec): bytes(c.data) for c in clouds}
     assert set(online) == set(offline), (tmp_path / "decoder.log").read_text()[-2000:]
