@@ -28,6 +28,7 @@ def views(renderer):
     return simulated_board_views(renderer, PATTERN, SQUARE, views=12, seed=1)
 
 
+@pytest.mark.slow
 def test_calibration_recovers_the_true_optics(renderer, views):
     result = calibrate_stereo(views, PATTERN, SQUARE)
     rig = renderer.rig
@@ -51,6 +52,7 @@ def test_calibration_recovers_the_true_optics(renderer, views):
 # src/tactile_sl_decoder/test/test_pattern_calibration.py, where the command now lives.
 
 
+@pytest.mark.slow
 def test_bag_input_pairs_by_stamp(tmp_path, views):
     path = tmp_path / "boards.mcap"
     with BagWriter(path) as bag:

@@ -135,6 +135,7 @@ def test_loads_superpose_with_indenters():
     assert np.allclose(both, parts, rtol=0, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_truth_wrench_and_contact_match_the_requested_loads(loaded):
     scene, frame, msgs = loaded
     touch = frame.truth.touch
@@ -158,6 +159,7 @@ def test_truth_wrench_and_contact_match_the_requested_loads(loaded):
     assert touch.cells_in_contact == int(inside.sum()) > 0
 
 
+@pytest.mark.slow
 def test_truth_displacement_at_cells_is_the_field_sample(loaded, renderer):
     _, frame, _ = loaded
     touch = frame.truth.touch
@@ -169,6 +171,7 @@ def test_truth_displacement_at_cells_is_the_field_sample(loaded, renderer):
     assert np.abs(touch.displacement[:, 2]).max() > 1e-5
 
 
+@pytest.mark.slow
 def test_touch_topics_layout_and_round_trip(loaded):
     scene, frame, msgs = loaded
     by_topic = {t: (schema, fields) for t, schema, fields in msgs}
@@ -194,6 +197,7 @@ def test_touch_topics_layout_and_round_trip(loaded):
     assert back.region_centroid.shape == (2, 3)
 
 
+@pytest.mark.slow
 def test_untouched_frame_and_mixed_scene(renderer):
     scene = parse_scene(dict(LOAD_SCENE))
     frame = render_scene_frame(scene, renderer, 0)

@@ -18,6 +18,7 @@ def renderer():
     return Renderer(load_artwork())
 
 
+@pytest.mark.slow
 def test_defaults_are_off_and_bundled_bag_frame_is_unchanged():
     nz = Nuisances()
     assert not nz.damages_print and not nz.see_through and not nz.jpeg_quality
@@ -50,6 +51,7 @@ def test_blur_kernels_are_normalised_and_centred():
         assert abs(float((k * xs).sum()) - n) < 1e-5 and abs(float((k * ys).sum()) - n) < 1e-5
 
 
+@pytest.mark.slow
 def test_camera_nuisances_change_the_images(renderer):
     base = renderer.render(PRESS, Nuisances(), seed=1)
     jpeg = renderer.render(PRESS, Nuisances(jpeg_quality=50), seed=1)
@@ -64,6 +66,7 @@ def test_camera_nuisances_change_the_images(renderer):
         np.diff(base.left.astype(float), axis=1))
 
 
+@pytest.mark.slow
 def test_dark_object_is_seen_in_the_contact_area_only(renderer):
     base = renderer.render(PRESS, Nuisances(noise_sigma=0, shot_noise=0), seed=1)
     dark = renderer.render(PRESS, Nuisances(noise_sigma=0, shot_noise=0, see_through="dark"),
@@ -78,6 +81,7 @@ def test_dark_object_is_seen_in_the_contact_area_only(renderer):
     assert np.array_equal(flat.left, renderer.render([], Nuisances(), seed=1).left)
 
 
+@pytest.mark.slow
 def test_print_damage_is_fixed_per_seed_and_in_the_truth(renderer):
     nz = Nuisances(dropout=0.05, wear=0.05, scratches=3, bubbles=2)
     a = renderer.render([], nz, seed=4)
@@ -90,6 +94,7 @@ def test_print_damage_is_fixed_per_seed_and_in_the_truth(renderer):
     assert not np.array_equal(renderer.render([], nz, seed=5).truth.visible, a.truth.visible)
 
 
+@pytest.mark.slow
 def test_dust_darkens_fixed_specks_and_flags_their_glyphs(renderer):
     nz = Nuisances(dust=20, dust_radius_px=3.0, dust_strength=0.8, noise_sigma=0,
                    shot_noise=0)

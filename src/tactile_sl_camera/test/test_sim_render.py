@@ -10,6 +10,9 @@ from tactile_sl_camera.sim.artwork import ArtworkError, random_values, write_art
 from tactile_sl_camera.sim.scenes import Scene
 from tactile_sl_camera.sim.synth import frame_messages
 
+# Renders full stereo frames (seconds each on two cores): `make test`, not `make unit`.
+pytestmark = pytest.mark.slow
+
 
 class _Msg:
     """Attribute access over a fields dict (what a bag decoder gives)."""

@@ -53,6 +53,7 @@ def bags(tmp_path_factory):
     return root / "out"
 
 
+@pytest.mark.slow
 def test_bag_topics_stamps_and_ground_truth(bags):
     reader = BagReader(bags / "press.mcap")
     reader.require_topics(TOPICS)
@@ -72,6 +73,7 @@ def test_bag_topics_stamps_and_ground_truth(bags):
     assert all(len(v) == 5 for v in stamps.values())
 
 
+@pytest.mark.slow
 def test_bag_opens_with_an_independent_reader(bags):
     with open(bags / "colour.mcap", "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])

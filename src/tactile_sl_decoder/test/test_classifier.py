@@ -104,6 +104,7 @@ def test_weights_with_code_are_not_unpickled(tmp_path):
         Classifier.load(path)
 
 
+@pytest.mark.slow
 def test_shipped_weights_classify_synthetic_glyphs():
     """Independent renderer (not the training simulator): shipped weights still read it."""
     assert default_weights_path().is_file()

@@ -78,6 +78,7 @@ def _touching_groups(sep: float, spacing: float, seed: int):
     return gray, centres, groups
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sep,spacing,seed", [(0.55, 18.0, 0), (0.6, 22.0, 1),
                                               (0.7, 16.0, 2), (0.6, 14.0, 3)])
 def test_linked_pairs_and_triples_are_split(sep, spacing, seed):
@@ -153,6 +154,7 @@ def test_spacing_estimate_on_a_lattice():
     assert estimate_spacing(u[:1], v[:1])[0] == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("offset", [-2.0, 0.0, 0.5, 1.0, 7.5, 8.0, 20.0])
 @pytest.mark.parametrize("dark", [True, False])
 def test_threshold_matches_cv2_adaptive_threshold(offset, dark):
@@ -165,6 +167,7 @@ def test_threshold_matches_cv2_adaptive_threshold(offset, dark):
     np.testing.assert_array_equal(threshold_ink(gray, params), ref)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("x0,y0,w,h", [(0, 0, 640, 480), (37, 11, 301, 200),
                                        (116, 0, 524, 480), (3, 5, 77, 101)])
 def test_ink_box_labels_like_the_whole_image(x0, y0, w, h):

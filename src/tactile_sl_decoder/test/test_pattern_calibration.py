@@ -36,6 +36,10 @@ from tactile_sl_decoder.calibrate.simulate import (
 from tactile_sl_decoder.cli import calibrate_cmd
 from tactile_sl_decoder.stereo.stereo import StereoRig
 
+# Renders and calibrates from simulated views (seconds per fixture): `make test`, not
+# `make unit`.
+pytestmark = pytest.mark.slow
+
 
 def _cli(*argv):
     parser = argparse.ArgumentParser()

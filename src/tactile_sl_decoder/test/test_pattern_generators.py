@@ -24,6 +24,7 @@ SMALL = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(GENERATORS))
 @pytest.mark.parametrize("constraints,size", SMALL)
 def test_each_generator_output_verifies_and_is_deterministic(name, constraints, size):
@@ -55,6 +56,7 @@ def test_shipped_size_is_reached_by_our_generator():
     assert np.array_equal(result.array, shipped.array)
 
 
+@pytest.mark.slow
 def test_k6_100x100_under_a_minute():
     c = Constraints(6, (3, 3), 3)
     result = generate("auto", c, 100, 100, seed=0, time_limit=60)
@@ -117,6 +119,7 @@ def test_luby_sequence():
     assert [dfs.luby(i) for i in range(1, 16)] == [1, 1, 2, 1, 1, 2, 4, 1, 1, 2, 1, 1, 2, 4, 8]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("h", [1, 2, 3, 4, 5])
 def test_window_index_dense_and_scan_agree_with_brute_force(monkeypatch, h):
     c = Constraints(3, (3, 3), h)
@@ -151,6 +154,7 @@ def test_pyramid_regions_cover_the_interior():
     assert len(regions) == 3  # interior rows 3..11 in bands of 3
 
 
+@pytest.mark.slow
 def test_tidy_keeps_validity_and_puts_the_constant_row_on_circles():
     c = Constraints(3, (3, 3), 3)
     plain = generate("linear", c, 30, 28, seed=0, time_limit=30).array

@@ -69,6 +69,7 @@ def test_bad_loads_files(tmp_path, text, words):
         load_loads_file(path)
 
 
+@pytest.mark.slow
 def test_cli_recovers_the_bag_modulus_within_5_percent(tmp_path):
     loads = tmp_path / "loads.yaml"
     loads.write_text("loads:\n" + "".join(f"  - {{frame: {i + 1}, normal_force: {f}}}\n"

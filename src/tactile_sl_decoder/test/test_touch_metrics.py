@@ -155,6 +155,7 @@ def test_sensor_resolution(tmp_path):
     assert given.elastomer.youngs_modulus == 2e5 and "--sensor" in where
 
 
+@pytest.mark.slow
 def test_evaluate_touch_section_on_a_touch_bag(tmp_path):
     bag = REPO / "bags" / "touch_calibration.mcap"
     args = argparse.Namespace(sensor=None, reference_frames=1, pattern=None, weights=None,
