@@ -13,6 +13,8 @@ import re
 
 import pytest
 
+from ros_harness import REPO
+
 PKG = pathlib.Path(__file__).resolve().parents[1] / "tactile_sl_decoder"
 NAME = "tactile_sl_decoder"
 
@@ -143,7 +145,6 @@ def test_contract_mirrors_the_symbol_array_message():
     assert contract.CELL_UNKNOWN == msg.SymbolArray.CELL_UNKNOWN
 
 
-REPO = PKG.parents[2]
 SOURCE_ROOTS = {"tactile_sl_decoder": REPO / "src" / "tactile_sl_decoder",
                 "tactile_sl_camera": REPO / "src" / "tactile_sl_camera"}
 DOTTED = re.compile(r"\btactile_sl_(?:decoder|camera|msgs)(?:\.[A-Za-z_]\w*)+")

@@ -51,13 +51,16 @@ def _call_name(node: ast.AST) -> str:
     return ".".join(reversed(parts))
 
 
-def directories_climbed(name: ast.Name, parents: dict[ast.AST, ast.AST]) -> int:
+def directories_climbed(name: ast.Name, parents: dict[ast.AST, ast.AST],
+                        walked: set[ast.AST] | None = None) -> int:
     """How far up from a test file an expression on ``__file__`` reaches (1: its folder).
 
     Counts ``.parent``, ``.parents[k]`` and ``os.path.dirname``; ``Path(...)``,
-    ``.resolve()``, ``.absolute()`` and ``os.path.abspath/realpath`` keep the level.
+    ``.resolve()``, ``.absolute()`` and ``os.path.abspath/realpath`` keep the level.  The
+    nodes of the expression go into ``walked``.
     """
     node, levels = name, 0
+    walked = set() if walked is None else walked
     while node in parents:
         up = parents[node]
         if isinstance(up, ast.Attribute) and up.attr == "parent":
@@ -76,6 +79,7 @@ def directories_climbed(name: ast.Name, parents: dict[ast.AST, ast.AST]) -> int:
         else:
             break
         node = up
+        walked.add(node)
     return levels
 
 
@@ -84,6 +88,10 @@ def harness_violations(path: pathlib.Path, source: str | None = None) -> list[st
     source = path.read_text() if source is None else source
     tree = ast.parse(source)
     parents, docstrings = _parents(tree), _docstrings(tree)
+    from_file: set[ast.AST] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and node.id == "__file__":
+            directories_climbed(node, parents, from_file)
     own_root = (REPO / "tests" if path.parent.name == "tests"
                 else path.parents[len(path.relative_to(REPO).parts) - 3])  # src/<pkg>
     found = []
@@ -104,6 +112,10 @@ def harness_violations(path: pathlib.Path, source: str | None = None) -> list[st
             if levels and not path.parents[levels - 1].is_relative_to(own_root):
                 found.append(f"{where} reaches {path.parents[levels - 1].relative_to(REPO)}/ "
                              f"from __file__ (use ros_harness.REPO or BAGS)")
+        elif isinstance(node, ast.Subscript) and isinstance(node.value, ast.Attribute) \
+                and node.value.attr == "parents" and node not in from_file:
+            found.append(f"{where} climbs with .parents[...] from a path of its own "
+                         f"(use ros_harness.REPO or BAGS)")
     return found
 
 
@@ -165,14 +177,15 @@ def test_the_rules_catch_each_way_of_doing_it_alone():
            "LIB = get_package_prefix('tactile_sl_decoder')\n"
            "env = dict(os.environ, ROS_DOMAIN_ID='7')\n"
            "os.environ['ROS_DOMAIN_ID'] = '8'\n"
-           "rclpy.init(domain_id=100 + os.getpid() % 100)\n")
+           "rclpy.init(domain_id=100 + os.getpid() % 100)\n"
+           "TOOLS = (ROOT / 'src').parents[0] / 'tools'\n")
     found = harness_violations(probe, bad)
     for line, what in ((3, "reaches ./"), (4, "reaches ./"), (5, "builds an install/ path"),
                        (6, "finds an executable"), (7, "sets ROS_DOMAIN_ID"),
-                       (8, "sets ROS_DOMAIN_ID"), (9, "starts rclpy")):
+                       (8, "sets ROS_DOMAIN_ID"), (9, "starts rclpy"), (10, "climbs")):
         assert any(f.startswith(f"tests/test_probe.py:{line} {what}") for f in found), \
             (line, found)
-    assert len(found) == 7, found
+    assert len(found) == 8, found
     good = ('"""Runs the node installed under install/."""\n'
             "import pathlib\nfrom ros_harness import BAGS, REPO, next_domain_id\n"
             "HERE = pathlib.Path(__file__).parent\n")
