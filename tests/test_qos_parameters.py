@@ -10,14 +10,13 @@ from __future__ import annotations
 import time
 
 import pytest
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from test_node_parameters import Client
 
 from ros_harness import next_domain_id, start_node, stop
 
 pytestmark = pytest.mark.ros
 
-rclpy = pytest.importorskip("rclpy")
-from rclpy.qos import DurabilityPolicy, ReliabilityPolicy  # noqa: E402
 
 
 def _endpoints(client: Client, topic: str, publishers: bool, timeout: float = 30.0) -> list:

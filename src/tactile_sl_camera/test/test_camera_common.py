@@ -2,15 +2,11 @@
 import array
 
 import numpy as np
-import pytest
+from builtin_interfaces.msg import Time
 
-pytest.importorskip("sensor_msgs.msg")
-
-from builtin_interfaces.msg import Time  # noqa: E402
-
-from tactile_sl_camera.clouds import cloud_fields, cloud_to_arrays, pack_points  # noqa: E402
-from tactile_sl_camera.images import image_fields  # noqa: E402
-from tactile_sl_camera.nodes.camera_common import (  # noqa: E402
+from tactile_sl_camera.clouds import cloud_fields, cloud_to_arrays, pack_points
+from tactile_sl_camera.images import image_fields
+from tactile_sl_camera.nodes.camera_common import (
     cloud_msg,
     image_msg,
     uint8_array,

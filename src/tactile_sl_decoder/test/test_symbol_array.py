@@ -131,8 +131,9 @@ def test_inconsistent_messages_raise_one_error_class():
 
 
 def test_rclpy_message_roundtrip():
-    msg_mod = pytest.importorskip("tactile_sl_msgs.msg")
-    std = pytest.importorskip("std_msgs.msg")
+    from std_msgs import msg as std
+
+    from tactile_sl_msgs import msg as msg_mod
     glyphs = Glyphs.from_detections(_detections(6), (480, 640), label=[0, 1, 2, 0, 1, 255],
                                     confidence=np.linspace(0, 1, 6), row=np.arange(6),
                                     col=np.arange(6)[::-1])
