@@ -1,15 +1,18 @@
 """Through the ROS graph: `replay` -> `decoder` at a fixed input rate; drops and latency.
 
-Both are the installed executables, run as separate processes (namespace /tactile,
-loopback DDS, private domain). The replay restamps every stereo frame with the time it is
-published, so latency = arrival time of the cloud here - its stamp. A frame is dropped if
-no cloud with its stamp arrives. Figures, not a pass/fail test.
+Both are the installed executables, run as separate processes (namespace /tactile, or one
+namespace per sensor with ``--sensors N``: N replay + decoder pairs on one machine, as on a
+hand with several sensors; loopback DDS, private domain). The replay restamps every stereo
+frame with the time it is published, so latency = arrival time of the cloud here - its
+stamp. A frame is dropped if no cloud with its stamp arrives. Figures, not a pass/fail test.
 
     python tools/bench_graph.py --rate 3 --seconds 60    # 30 Hz for 60 s
     python tools/bench_graph.py --rate 6 --seconds 60    # 60 Hz
+    python tools/bench_graph.py --rate 3 --seconds 60 --sensors 2
+    python tools/bench_graph.py --rate 6 --seconds 600   # resident memory over 10 min
 
-Also printed: CPU use of the decoder and the replay processes over the run (per cent of
-one CPU) and the decoder's resident memory when its first cloud arrives and at the end.
+Also printed: CPU use of every decoder and replay process over the run (per cent of one
+CPU) and their resident memory when the first cloud arrives and at the end.
 """
 from __future__ import annotations
 
@@ -36,7 +39,7 @@ sys.path.insert(0, str(REPO / "tests"))
 from ros_harness import executable, ros_env, stop  # noqa: E402
 
 
-def main() -> int:
+def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, report
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--bag", type=pathlib.Path, default=REPO / "bags" / "two_contacts.mcap")
     parser.add_argument("--rate", type=float, default=3.0,
@@ -44,56 +47,73 @@ def main() -> int:
     parser.add_argument("--loops", type=int, default=43, help="passes over the bag")
     parser.add_argument("--seconds", type=float, default=0.0,
                         help="play this long instead (sets --loops from the bag's frames)")
+    parser.add_argument("--sensors", type=int, default=1,
+                        help="replay + decoder pairs, each in its own namespace /sensor<i>")
     parser.add_argument("--domain-id", type=int, default=int(os.environ.get("BENCH_DOMAIN_ID", 29)))
     parser.add_argument("--logs", type=pathlib.Path, default=REPO / "out" / "bench_graph")
     args = parser.parse_args()
+    if not 1 <= args.sensors <= 8:
+        parser.error("--sensors must be 1..8")
     args.logs.mkdir(parents=True, exist_ok=True)
     frames_per_pass = count_bag_frames(args.bag)
     if args.seconds > 0:
         args.loops = max(1, math.ceil(args.seconds * 10.0 * args.rate / frames_per_pass))
     expected = frames_per_pass * args.loops
+    spaces = ["/tactile"] if args.sensors == 1 else [f"/sensor{i}" for i in range(args.sensors)]
 
     context = Context()
     rclpy.init(context=context, domain_id=args.domain_id)
-    node = rclpy.create_node("bench_graph", namespace="/tactile", context=context)
+    node = rclpy.create_node("bench_graph", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    latency_ms: dict[int, float] = {}
+    latency_ms: dict[str, dict[int, float]] = {ns: {} for ns in spaces}
     samples: dict[str, dict[str, tuple[float, float, float]]] = {"start": {}, "end": {}}
-    procs: list[subprocess.Popen] = []
+    procs: dict[str, subprocess.Popen] = {}
 
-    def on_cloud(msg: PointCloud2) -> None:
-        stamp = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
-        latency_ms.setdefault(stamp, (time.time_ns() - stamp) / 1e6)
-        if not samples["start"]:
-            samples["start"] = _sample(procs)
+    def listener(ns: str):
+        def on_cloud(msg: PointCloud2) -> None:
+            stamp = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
+            latency_ms[ns].setdefault(stamp, (time.time_ns() - stamp) / 1e6)
+            if not samples["start"]:
+                samples["start"] = _sample(procs)
+        return on_cloud
 
-    node.create_subscription(PointCloud2, "points", on_cloud,
-                             QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+    for ns in spaces:
+        node.create_subscription(PointCloud2, f"{ns}/points", listener(ns),
+                                 QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
     env = ros_env(args.domain_id)
     try:
-        procs.append(subprocess.Popen(
-            [str(executable("tactile_sl_decoder", "decoder")), "--ros-args", "-r",
-             "__ns:=/tactile", "-p", "publish_symbols:=false"],
-            env=env, stdout=open(args.logs / "decoder.log", "w"), stderr=subprocess.STDOUT))
-        # Play only once this listener is matched with the decoder's `points` publisher.
+        for ns in spaces:
+            tag = ns.strip("/").replace("/", "_")
+            procs[f"decoder {ns}"] = subprocess.Popen(
+                [str(executable("tactile_sl_decoder", "decoder")), "--ros-args", "-r",
+                 f"__ns:={ns}", "-p", "publish_symbols:=false"],
+                env=env, stdout=open(args.logs / f"decoder_{tag}.log", "w"),
+                stderr=subprocess.STDOUT)
+        # Play only once this listener is matched with every decoder's `points` publisher.
         ready = time.monotonic() + 60
-        while node.count_publishers("/tactile/points") < 1 and time.monotonic() < ready:
+        while (min(node.count_publishers(f"{ns}/points") for ns in spaces) < 1
+               and time.monotonic() < ready):
             executor.spin_once(timeout_sec=0.05)
-        replay = subprocess.Popen(
-            [str(executable("tactile_sl_camera", "replay")), "--ros-args", "-r",
-             "__ns:=/tactile", "-p", f"bag:={args.bag}", "-p", f"rate:={args.rate}",
-             "-p", "loop:=true", "-p", f"loops:={args.loops}", "-p", "restamp:=true",
-             "-p", "wait_for_subscribers:=1", "-p", "wait_for_subscribers_timeout:=60.0"],
-            env=env, stdout=open(args.logs / "replay.log", "w"), stderr=subprocess.STDOUT)
-        procs.append(replay)
+        replays = []
+        for ns in spaces:
+            tag = ns.strip("/").replace("/", "_")
+            replay = subprocess.Popen(
+                [str(executable("tactile_sl_camera", "replay")), "--ros-args", "-r",
+                 f"__ns:={ns}", "-p", f"bag:={args.bag}", "-p", f"rate:={args.rate}",
+                 "-p", "loop:=true", "-p", f"loops:={args.loops}", "-p", "restamp:=true",
+                 "-p", "wait_for_subscribers:=1", "-p", "wait_for_subscribers_timeout:=60.0"],
+                env=env, stdout=open(args.logs / f"replay_{tag}.log", "w"),
+                stderr=subprocess.STDOUT)
+            procs[f"replay {ns}"] = replay
+            replays.append(replay)
         deadline = time.monotonic() + 60 + expected / (10.0 * args.rate) * 3
         next_sample = time.monotonic()
         while time.monotonic() < deadline:
-            if time.monotonic() >= next_sample:    # the last sample before the replay ends
+            if time.monotonic() >= next_sample:    # the last sample before the replays end
                 samples["end"].update(_sample(procs))
                 next_sample += 1.0
-            if replay.poll() is not None:
+            if all(r.poll() is not None for r in replays):
                 break
             executor.spin_once(timeout_sec=0.02)
         end = time.monotonic() + 1.0
@@ -101,37 +121,40 @@ def main() -> int:
             executor.spin_once(timeout_sec=0.02)
         samples["end"].update(_sample(procs))
     finally:
-        for proc in reversed(procs):
+        for proc in reversed(list(procs.values())):
             stop(proc)
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=context)
-    lat = np.array(list(latency_ms.values()))
-    print(f"replay -> decoder over loopback DDS: {expected} stereo frames of {args.bag.name} at "
-          f"{10.0 * args.rate:.0f} Hz, Fast DDS profile "
+    print(f"replay -> decoder over loopback DDS, {len(spaces)} sensor(s): {expected} stereo "
+          f"frames of {args.bag.name} each at {10.0 * args.rate:.0f} Hz, Fast DDS profile "
           f"{os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE') or 'none'}, load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
-    print(f"clouds received {len(lat)}, dropped {expected - len(lat)}")
-    if len(lat):
-        print(f"latency image stamp -> cloud received: median {np.median(lat):.1f} ms, "
-              f"p90 {np.percentile(lat, 90):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "
-              f"max {lat.max():.1f} ms")
+    received = 0
+    for ns in spaces:
+        lat = np.array(list(latency_ms[ns].values()))
+        received += len(lat)
+        print(f"{ns}: clouds received {len(lat)}, dropped {expected - len(lat)}")
+        if len(lat):
+            print(f"{ns}: latency image stamp -> cloud received: median {np.median(lat):.1f} ms,"
+                  f" p90 {np.percentile(lat, 90):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "
+                  f"max {lat.max():.1f} ms")
     start, end = samples["start"], samples["end"]
-    for name in ("decoder", "replay"):
+    for name in procs:
         if name in start and name in end:
             (t0, cpu0, rss0), (t1, cpu1, rss1) = start[name], end[name]
             print(f"{name}: CPU {100 * (cpu1 - cpu0) / max(t1 - t0, 1e-9):.0f} % of one CPU "
                   f"from the first cloud on ({t1 - t0:.0f} s); resident memory "
                   f"{rss0:.1f} MB at the first cloud, {rss1:.1f} MB at the end "
                   f"({rss1 - rss0:+.1f} MB)")
-    return 0 if len(lat) == expected else 1
+    return 0 if received == expected * len(spaces) else 1
 
 
-def _sample(procs: list[subprocess.Popen]) -> dict[str, tuple[float, float, float]]:
-    """(wall s, CPU s, resident MB) of the decoder (procs[0]) and the replay (procs[1])."""
+def _sample(procs: dict[str, subprocess.Popen]) -> dict[str, tuple[float, float, float]]:
+    """(wall s, CPU s, resident MB) of every process, by name."""
     out = {}
     tick = os.sysconf("SC_CLK_TCK")
-    for name, proc in zip(("decoder", "replay"), procs):
+    for name, proc in list(procs.items()):
         try:
             stat = pathlib.Path(f"/proc/{proc.pid}/stat").read_text()
             fields = stat.rsplit(")", 1)[1].split()
