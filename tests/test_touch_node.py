@@ -53,12 +53,14 @@ def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros
     frames: dict = {}
     for kind, side, m in _bag_messages(4):
         frames.setdefault((m.header.stamp.sec, m.header.stamp.nanosec), []).append((kind, side, m))
-    for stamp, parts in sorted(frames.items()):
+    for i, (stamp, parts) in enumerate(sorted(frames.items())):
         def publish(parts=parts):
             for kind, side, m in sorted(parts, key=lambda p: p[0] != "info"):
                 pubs[(kind, side)].publish(m)
                 ros.spin(0.2 if kind == "info" else 0.02)
         assert _send_until_cloud(ros, clouds, stamp, publish), proc.lines()[-5:]
+        if i == 0:   # the reference is prepared beside the frames: outputs start once it is
+            assert proc.wait_for_log("fit residual", 30.0, lambda: ros.spin(0.05)), proc.log()
     end = time.monotonic() + 5
     while time.monotonic() < end and len(received["depth"]) < len(frames) - 1:
         ros.spin(0.05)

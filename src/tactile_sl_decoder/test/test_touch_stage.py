@@ -94,3 +94,38 @@ def test_contact_area_of_a_hertz_load(thickness):
     out = stage.update(_points(disp))
     assert abs(out.contact.area / (np.pi * radius ** 2) - 1) < 0.15
     assert len(out.contact.region_force) == 1
+
+
+def test_background_reference_gives_the_same_outputs_without_blocking_frames():
+    sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
+    inline = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1))
+    live = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1),
+                      background=True)
+    rng = np.random.default_rng(3)
+    rest = _points(_displacement(sensor.elastomer, [], 2e-6, rng))
+    assert inline.update(rest) is None and inline.ready
+    assert live.update(rest) is None and not live.ready and live.preparing
+    pressed = _points(_displacement(sensor.elastomer, [(0.0, 0.0, -0.4, 2e-3, 0.0, 0.0)],
+                                     2e-6, rng))
+    live._preparing.done.wait(60)      # what the node's timer waits for
+    want = inline.update(pressed)
+    got = live.update(pressed)         # installs the prepared reference, then this frame
+    assert got is not None and live.ready and not live.preparing
+    assert np.array_equal(got.force, want.force) and np.array_equal(got.depth, want.depth,
+                                                                    equal_nan=True)
+    for name in ("displacement", "wrench_force", "wrench_moment"):
+        assert np.array_equal(getattr(got, name), getattr(want, name)), name
+    assert got.contact == want.contact
+
+
+def test_a_tare_drops_a_reference_still_being_prepared():
+    sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
+    live = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1),
+                      background=True)
+    rng = np.random.default_rng(4)
+    assert live.update(_points(_displacement(sensor.elastomer, [], 2e-6, rng))) is None
+    old = live._preparing
+    ok, _ = live.tare()
+    assert ok and not live.preparing and not live.ready
+    old.done.wait(60)
+    assert not live.poll() and not live.ready     # the dropped one is never installed

@@ -147,7 +147,8 @@ class TouchOutputs:
         params.contact.force_on = float(force_on)
         params.contact.force_off = float(force_off)
         params.tare_max_depth = float(tare_max_depth)
-        self.stage = TouchStage(sensor, shape, pitch, mirrored, params)
+        # the reference is prepared in a worker thread: images keep flowing meanwhile
+        self.stage = TouchStage(sensor, shape, pitch, mirrored, params, background=True)
         self.frame_id = str(getattr(node, "frame_prefix", "")) + sensor.pad_frame
         self.pub_field = node.create_publisher(PointCloud2, "field", out_qos)
         self.pub_wrench = node.create_publisher(WrenchStamped, "wrench", out_qos)
@@ -158,6 +159,10 @@ class TouchOutputs:
         self.pub_pose = node.create_publisher(PoseStamped, "pad_pose", latched)
         self.tf = StaticTransformBroadcaster(node) if StaticTransformBroadcaster else None
         node.create_service(Trigger, "tare", self._on_tare)
+        # announce (and install) a reference prepared in the background as soon as it is done
+        self._poll_timer = node.create_timer(0.05, self._poll_reference)
+        # stamp and camera frame of the frame that completed the reference (for pad_pose)
+        self._reference_frame: tuple[tuple[int, int], str] = ((0, 0), "")
         e = sensor.elastomer
         node.get_logger().info(
             f"touch: E {e.youngs_modulus:.3g} Pa, nu {e.poisson_ratio:.3g}, "
@@ -178,7 +183,7 @@ class TouchOutputs:
         if not self.enabled:
             return
         self.stage = TouchStage(self.stage.sensor, self.shape, self.pitch, mirrored,
-                                self.stage.params)
+                                self.stage.params, background=True)
         self.announced_waiting = False
         self.node.get_logger().info("mirrored changed: the touch reference is taken again "
                                     "from the next decoded frames (the pad must be untouched)")
@@ -193,11 +198,26 @@ class TouchOutputs:
         self.announced_waiting = False
         return response
 
+    def _poll_reference(self) -> None:
+        """Timer: a reference finished in the background is installed and announced."""
+        if not self.stage.preparing:
+            return
+        try:
+            if self.stage.poll():
+                self._announce_reference(*self._reference_frame)
+        except ReferenceError as exc:
+            self._unusable(exc)
+
+    def _unusable(self, exc: ReferenceError) -> None:
+        self.node.get_logger().warning(f"touch: reference not usable ({exc}); trying again "
+                                       f"with the next frames")
+        self.stage.tare()
+
     def process(self, points: np.ndarray, stamp: tuple[int, int], camera_frame: str) -> None:
         """Touch outputs of one frame's points (nothing until a reference exists)."""
         if not self.enabled:
             return
-        had_reference = self.stage.ready
+        had_reference, was_preparing = self.stage.ready, self.stage.preparing
         if not had_reference and not self.announced_waiting:
             self.announced_waiting = True
             self.node.get_logger().info(
@@ -206,13 +226,14 @@ class TouchOutputs:
         try:
             result = self.stage.update(points)
         except ReferenceError as exc:
-            self.node.get_logger().warning(f"touch: reference not usable ({exc}); trying "
-                                           f"again with the next frames")
-            self.stage.tare()
+            self._unusable(exc)
             return
+        if not had_reference and not was_preparing and (self.stage.preparing
+                                                         or self.stage.ready):
+            self._reference_frame = (stamp, camera_frame)    # this frame completed it
+        if self.stage.ready and not had_reference:
+            self._announce_reference(*self._reference_frame)
         if result is None:
-            if self.stage.ready and not had_reference:
-                self._announce_reference(stamp, camera_frame)
             return
         f = self.frame_id
         self.pub_field.publish(cloud_msg(field_fields(result, stamp, f)))
