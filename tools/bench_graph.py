@@ -49,6 +49,14 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
                         help="play this long instead (sets --loops from the bag's frames)")
     parser.add_argument("--sensors", type=int, default=1,
                         help="replay + decoder pairs, each in its own namespace /sensor<i>")
+    parser.add_argument("--chain", action="store_true",
+                        help="the stage chain instead of one decoder: symbol_extractor and "
+                        "symbol_classifier per camera, decoder input:=symbols (5 processes "
+                        "per sensor, so the work spreads over the cores)")
+    parser.add_argument("--warmup", type=float, default=0.0,
+                        help="take the 'start' CPU / memory sample this many seconds after the "
+                        "first cloud (memory growth without start-up: allocator pools, the "
+                        "touch reference)")
     parser.add_argument("--domain-id", type=int, default=int(os.environ.get("BENCH_DOMAIN_ID", 29)))
     parser.add_argument("--logs", type=pathlib.Path, default=REPO / "out" / "bench_graph")
     args = parser.parse_args()
@@ -69,13 +77,14 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
     latency_ms: dict[str, dict[int, float]] = {ns: {} for ns in spaces}
     samples: dict[str, dict[str, tuple[float, float, float]]] = {"start": {}, "end": {}}
     procs: dict[str, subprocess.Popen] = {}
+    first_cloud: list[float | None] = [None]
 
     def listener(ns: str):
         def on_cloud(msg: PointCloud2) -> None:
             stamp = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
             latency_ms[ns].setdefault(stamp, (time.time_ns() - stamp) / 1e6)
-            if not samples["start"]:
-                samples["start"] = _sample(procs)
+            if first_cloud[0] is None:
+                first_cloud[0] = time.monotonic()
         return on_cloud
 
     for ns in spaces:
@@ -85,9 +94,22 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
     try:
         for ns in spaces:
             tag = ns.strip("/").replace("/", "_")
+            decoder_args = ["-r", f"__ns:={ns}", "-p", "publish_symbols:=false"]
+            if args.chain:
+                decoder_args += ["-p", "input:=symbols",
+                                 "-r", "left/symbols:=left/labelled_symbols",
+                                 "-r", "right/symbols:=right/labelled_symbols"]
+                for side in ("left", "right"):
+                    for exe, extra in (("symbol_extractor", ["-r", "image:=image_raw"]),
+                                       ("symbol_classifier", [])):
+                        procs[f"{exe} {ns}/{side}"] = subprocess.Popen(
+                            [str(executable("tactile_sl_decoder", exe)), "--ros-args",
+                             "-r", f"__ns:={ns}/{side}", *extra],
+                            env=env, stdout=open(args.logs / f"{exe}_{tag}_{side}.log", "w"),
+                            stderr=subprocess.STDOUT)
             procs[f"decoder {ns}"] = subprocess.Popen(
-                [str(executable("tactile_sl_decoder", "decoder")), "--ros-args", "-r",
-                 f"__ns:={ns}", "-p", "publish_symbols:=false"],
+                [str(executable("tactile_sl_decoder", "decoder")), "--ros-args",
+                 *decoder_args],
                 env=env, stdout=open(args.logs / f"decoder_{tag}.log", "w"),
                 stderr=subprocess.STDOUT)
         # Play only once this listener is matched with every decoder's `points` publisher.
@@ -110,6 +132,9 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
         deadline = time.monotonic() + 60 + expected / (10.0 * args.rate) * 3
         next_sample = time.monotonic()
         while time.monotonic() < deadline:
+            if (not samples["start"] and first_cloud[0] is not None
+                    and time.monotonic() >= first_cloud[0] + args.warmup):
+                samples["start"] = _sample(procs)
             if time.monotonic() >= next_sample:    # the last sample before the replays end
                 samples["end"].update(_sample(procs))
                 next_sample += 1.0
@@ -126,7 +151,8 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown(context=context)
-    print(f"replay -> decoder over loopback DDS, {len(spaces)} sensor(s): {expected} stereo "
+    what = "extractor -> classifier -> decoder chain" if args.chain else "decoder"
+    print(f"replay -> {what} over loopback DDS, {len(spaces)} sensor(s): {expected} stereo "
           f"frames of {args.bag.name} each at {10.0 * args.rate:.0f} Hz, Fast DDS profile "
           f"{os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE') or 'none'}, load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
@@ -144,8 +170,8 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
         if name in start and name in end:
             (t0, cpu0, rss0), (t1, cpu1, rss1) = start[name], end[name]
             print(f"{name}: CPU {100 * (cpu1 - cpu0) / max(t1 - t0, 1e-9):.0f} % of one CPU "
-                  f"from the first cloud on ({t1 - t0:.0f} s); resident memory "
-                  f"{rss0:.1f} MB at the first cloud, {rss1:.1f} MB at the end "
+                  f"from {args.warmup:g} s after the first cloud on ({t1 - t0:.0f} s); "
+                  f"resident memory {rss0:.1f} MB then, {rss1:.1f} MB at the end "
                   f"({rss1 - rss0:+.1f} MB)")
     return 0 if received == expected * len(spaces) else 1
 
