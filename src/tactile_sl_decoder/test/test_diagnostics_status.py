@@ -101,6 +101,9 @@ def test_touch_reference_state():
     d = DecoderDiagnostics()
     d.touch_state(True, False, frames_needed=2)
     assert d.touch.level == WARN and "waiting" in d.touch.message
+    d.touch_state(True, False, frames_needed=2, preparing=True)
+    assert d.touch.level == WARN and "preparing" in d.touch.message
+    assert d.touch.values["preparing"] == "True"
     d.touch_state(True, True, 1, 700, 3e-6, 1e-5, tares=1, last_tare="accepted: ok")
     assert d.touch.level == OK and d.touch.values["tares"] == "1"
     d.touch_state(True, True, 1, 700, 5e-5, 1e-4)

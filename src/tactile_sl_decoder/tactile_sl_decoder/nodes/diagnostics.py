@@ -182,12 +182,16 @@ class DecoderDiagnostics:
     def touch_state(self, enabled: bool, ready: bool = False, frames_needed: int = 1,
                     cells: int = 0, residual_rms_m: float = float("nan"),
                     residual_max_m: float = float("nan"), tares: int = 0,
-                    last_tare: str = "") -> None:
+                    last_tare: str = "", preparing: bool = False) -> None:
         """The touch reference and tare state, as the touch outputs see it now."""
         values = {"enabled": _fmt(enabled), "reference": _fmt(ready), "tares": _fmt(tares),
-                  "last_tare": last_tare or "none"}
+                  "last_tare": last_tare or "none", "preparing": _fmt(preparing)}
         if not enabled:
             self.touch = Status("touch reference", OK, "touch outputs off", values)
+            return
+        if not ready and preparing:
+            self.touch = Status("touch reference", WARN, "preparing the reference (pad pose, "
+                                "inversion) in the background; touch outputs follow", values)
             return
         if not ready:
             self.touch = Status("touch reference", WARN,
