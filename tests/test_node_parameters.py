@@ -117,12 +117,15 @@ def test_live_changes_are_applied_or_refused_with_a_reason(tmp_path):
                               ({"max_reprojection_px": -1.0}, "range"),
                               ({"classifier_threshold": 5.0}, "range"),
                               ({"extraction__block_size": 30}, "odd"),
+                              ({"outliers__mad_factor": 0.1}, "range"),
                               ({"contact_force_off": 50.0}, "must not exceed")]:
             (res,) = client.set(c, **change)
             assert not res.successful and words in res.reason, (change, res.reason)
         assert client.get(c, ["input", "max_reprojection_px"]) == {
             "input": "images", "max_reprojection_px": 1.5}
         assert all(r.successful for r in client.set(c, max_reprojection_px=0.5, mirrored=True))
+        (ok,) = client.set(c, outliers__passes=2)
+        assert ok.successful and client.get(c, ["outliers.passes"]) == {"outliers.passes": 2}
         deadline = time.monotonic() + 10
         while "parameters applied: max_reprojection_px=0.5" not in \
                 (tmp_path / "decoder.log").read_text() and time.monotonic() < deadline:

@@ -126,6 +126,7 @@ class DecoderNode(Node):
             "Largest rectified reprojection error of a stereo pair (epipolar gate), px.",
             (0.01, 1000.0),
             apply=lambda v: setattr(params.stereo, "max_reprojection_px", float(v))))
+        self._declare_outliers(decl, params)
         self.warn_period = float(decl("warn_period", 5.0,
             "Seconds between two warnings of the same kind (throttling).", (0.0, 3600.0),
             apply=lambda v: setattr(self, "warn_period", float(v))))
@@ -210,6 +211,26 @@ class DecoderNode(Node):
         """
         return declare_extraction(self.params, "extraction.", self._set_extraction,
                                   "Glyph extraction (input=images): ")
+
+    def _declare_outliers(self, decl: Any, params: PipelineParams) -> None:
+        """Live ``outliers.<field>`` parameters: the surface test of the stereo stage."""
+        o = params.outliers
+        what = "Surface outlier test (docs/robustness.md): "
+        spec = [("enabled", "drop points that leave the surface their lattice neighbours "
+                 "define.", None),
+                ("min_tolerance_m", "floor of a point's residual tolerance, m.", (1e-6, 0.01)),
+                ("mad_factor", "tolerance in robust standard deviations of the frame's "
+                 "residuals.", (0.5, 100.0)),
+                ("local_factor", "... or this many times the neighbours' median residual.",
+                 (0.5, 100.0)),
+                ("passes", "repeat with the dropped points removed, at most this often.",
+                 (1, 50))]
+        for name, text, value_range in spec:
+            kind = type(getattr(o, name))
+            setattr(o, name, kind(decl(
+                f"outliers.{name}", getattr(o, name), what + text, value_range,
+                apply=lambda v, n=name, k=kind: setattr(self.pipeline.params.outliers, n,
+                                                        k(v)))))
 
     def _diagnostic_limits(self) -> DiagnosticLimits:
         """One live ``diagnostics.<field>`` parameter per DiagnosticLimits threshold."""
