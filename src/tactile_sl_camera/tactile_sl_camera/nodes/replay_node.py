@@ -56,7 +56,7 @@ class ReplayNode(Node):
     def __init__(self) -> None:
         super().__init__("replay")
         live = LiveParameters(self)
-        ro = {"read_only": True}
+        ro: dict[str, Any] = {"read_only": True}
         bag = str(live.declare("bag", "",
             "Path of the MCAP bag (file, or rosbag2 directory holding one .mcap).", **ro))
         topics = [t for t in live.declare("topics", [""],
@@ -211,6 +211,7 @@ class ReplayNode(Node):
         published: int | None = None    # stamp it went out with
         for item in self.plan.items(loop_index):
             if self.pacing and recorded is not None and item.stamp_ns != recorded:
+                assert published is not None    # set together with recorded
                 self._wait_for_ack(published)
             delay = start + item.due_s - time.monotonic()
             if delay > 0:

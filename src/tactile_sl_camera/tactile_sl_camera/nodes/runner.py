@@ -9,7 +9,7 @@ its ``destroy_node`` and only then is rclpy shut down.
 """
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, TypeVar
 
 import rclpy
 from rclpy.exceptions import ParameterException
@@ -20,12 +20,13 @@ from rclpy.signals import SignalHandlerOptions
 from . import stop
 
 ConfigurationErrors = tuple[type[BaseException], ...]
+NodeT = TypeVar("NodeT", bound=Node)   # so that ``finished`` sees the node's own class
 
 
-def run_node(make_node: Callable[[], Node], name: str,
+def run_node(make_node: Callable[[], NodeT], name: str,
              fatal: ConfigurationErrors = (ValueError, OSError, RuntimeError),
              args: list[str] | None = None,
-             finished: Callable[[Node], bool] | None = None) -> None:
+             finished: Callable[[NodeT], bool] | None = None) -> None:
     """Create the node with ``make_node`` and spin it until a stop is requested.
 
     ``fatal`` errors (while creating the node or in a callback) exit with status 1 after one
@@ -33,8 +34,11 @@ def run_node(make_node: Callable[[], Node], name: str,
     """
     stop.install()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    node = None
+    node: NodeT | None = None
     status = 0
+    # also ParameterException: a value out of range, a wrong type (a named tuple, as mypy
+    # cannot read a starred tuple written in the except clause itself)
+    configuration_errors: ConfigurationErrors = (*fatal, ParameterException)
     executor = SingleThreadedExecutor()
     try:
         if not stop.requested():
@@ -45,7 +49,7 @@ def run_node(make_node: Callable[[], Node], name: str,
                 executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except (*fatal, ParameterException) as exc:   # also: a value out of range, a wrong type
+    except configuration_errors as exc:
         if not stop.requested():     # an error while stopping is not a configuration error
             logger = node.get_logger() if node is not None else rclpy.logging.get_logger(name)
             logger.fatal(str(exc))

@@ -37,7 +37,7 @@ class SimCameraNode(Node):
     def __init__(self) -> None:
         super().__init__("sim_camera")
         live = LiveParameters(self)
-        ro = {"read_only": True}
+        ro: dict[str, Any] = {"read_only": True}
         scenes_file = str(live.declare("scenes_file", "", "Scenes YAML (see docs/camera.md); "
                                        "empty = a built-in sphere press/hold/release.", **ro))
         scene_name = str(live.declare("scene", "", "Scene to play; empty = the first.", **ro))

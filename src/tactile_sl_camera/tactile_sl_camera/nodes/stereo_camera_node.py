@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -36,7 +37,7 @@ class StereoCameraNode(Node):
     def __init__(self) -> None:
         super().__init__("stereo_camera")
         live = LiveParameters(self)
-        ro = {"read_only": True}
+        ro: dict[str, Any] = {"read_only": True}
         cfg = CaptureConfig(
             left_device=str(live.declare("left_device", "0", "Left camera: index (0), device "
                                          "path (/dev/v4l/by-id/...) or video file/URL.", **ro)),

@@ -65,7 +65,7 @@ class DecoderNode(Node):
         super().__init__("decoder")
         self.params = LiveParameters(self)
         decl = self.params.declare
-        ro = {"read_only": True}
+        ro: dict[str, Any] = {"read_only": True}
         self.input_mode = str(decl("input", "images",
             "'images': run extraction + classification in-process on left/right image_raw "
             "(lowest latency); 'symbols': consume left/right symbols from the stage nodes.",
@@ -172,17 +172,24 @@ class DecoderNode(Node):
             for side in ("left", "right"):
                 self.pub_sym[side] = self.create_publisher(
                     SymbolArray, f"{side}/symbols_decoded", out_qos)
+        # ignore[misc] below: mypy cannot infer the type of a lambda with a default (s=side)
         for side in ("left", "right"):
-            self.create_subscription(CameraInfo, f"{side}/camera_info",
-                                     lambda m, s=side: self._on_info(s, m), sensor)
+            self.create_subscription(
+                CameraInfo, f"{side}/camera_info",
+                lambda m, s=side: self._on_info(s, m),  # type: ignore[misc]  # s=side
+                sensor)
             if self.input_mode == "images":
-                self.create_subscription(Image, f"{side}/image_raw",
-                                         lambda m, s=side: self._on_frame(s, m), sensor)
+                self.create_subscription(
+                    Image, f"{side}/image_raw",
+                    lambda m, s=side: self._on_frame(s, m),  # type: ignore[misc]  # s=side
+                    sensor)
             else:
                 if SymbolArray is None:
                     raise RuntimeError("tactile_sl_msgs is not built: input=symbols unavailable")
-                self.create_subscription(SymbolArray, f"{side}/symbols",
-                                         lambda m, s=side: self._on_frame(s, m), sensor)
+                self.create_subscription(
+                    SymbolArray, f"{side}/symbols",
+                    lambda m, s=side: self._on_frame(s, m),  # type: ignore[misc]  # s=side
+                    sensor)
         self.create_timer(10.0, self._report)
         # Calibration health (calibrate/health.py) is judged on the first frame decoded in
         # both images after start, a tare, a change of mirrored or of the CameraInfo: the
@@ -242,7 +249,9 @@ class DecoderNode(Node):
             setattr(limits, name, float(self.params.declare(
                 f"diagnostics.{name}", float(default),
                 "Diagnostics threshold: " + docs.get(name, name), (0.0, 1e6),
-                apply=lambda v, n=name: setattr(self.diag.limits, n, float(v)))))
+                # ignore: mypy cannot infer the type of a lambda with a default (n=name)
+                apply=lambda v, n=name: setattr(  # type: ignore[misc]
+                    self.diag.limits, n, float(v)))))
         return dataclasses.replace(limits)
 
     def _set_extraction(self, name: str, value: Any) -> None:

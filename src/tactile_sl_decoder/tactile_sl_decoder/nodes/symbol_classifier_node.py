@@ -75,6 +75,7 @@ class SymbolClassifierNode(Node):
             return
         start = time.perf_counter()
         if len(glyphs):
+            assert glyphs.patches is not None   # refused above when glyphs came without
             glyphs.label, glyphs.confidence = self.classifier.predict(glyphs.patches)
         self.pub.publish(fill_message(SymbolArray(), glyphs, header=msg.header,
                                       with_patches=self.keep_patches))

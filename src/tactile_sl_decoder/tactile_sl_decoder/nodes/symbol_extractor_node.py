@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from typing import Any
 
 import cv2
 from rclpy.node import Node
@@ -48,7 +49,7 @@ class SymbolExtractorNode(Node):
         self.count = 0
         self.busy = 0.0
 
-    def _set_extraction(self, name: str, value: object) -> None:
+    def _set_extraction(self, name: str, value: Any) -> None:
         self.params = dataclasses.replace(self.params, **{name: value})
 
     def on_image(self, msg: Image) -> None:

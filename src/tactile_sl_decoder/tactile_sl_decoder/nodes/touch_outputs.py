@@ -10,11 +10,10 @@ plus ``/tf_static`` when tf2_ros is importable, i.e. on a system ROS install).  
 from __future__ import annotations
 
 import array
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, Vector3, WrenchStamped
-from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Image, PointCloud2
 from std_srvs.srv import Trigger
@@ -31,6 +30,9 @@ from tactile_sl_decoder.touch.messages import (
 from tactile_sl_decoder.touch.reference import ReferenceError
 from tactile_sl_decoder.touch.sensor import load_sensor
 from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
+
+if TYPE_CHECKING:   # the one node that owns these outputs (imports this module at run time)
+    from tactile_sl_decoder.nodes.decoder_node import DecoderNode
 
 try:
     from tactile_sl_msgs.msg import Contact
@@ -93,7 +95,7 @@ def pose_msg(fields: dict[str, Any]) -> PoseStamped:
 class TouchOutputs:
     """Everything touch-related of the decoder node."""
 
-    def __init__(self, node: Node, shape: tuple[int, int], pitch: float, mirrored: bool,
+    def __init__(self, node: DecoderNode, shape: tuple[int, int], pitch: float, mirrored: bool,
                  out_qos: QoSProfile) -> None:
         self.node = node
         self.shape, self.pitch = shape, pitch
