@@ -94,6 +94,20 @@ def test_linked_pairs_and_triples_are_split(sep, spacing, seed):
     assert len(det) == len(centres)
 
 
+@pytest.mark.parametrize("sep,spacing,seed", [(0.55, 18.0, 0), (0.6, 22.0, 1),
+                                              (0.7, 16.0, 2), (0.6, 14.0, 3)])
+def test_centroid_of_split_glyphs_does_not_pull_towards_the_linked_neighbour(sep, spacing,
+                                                                           seed):
+    gray, _, groups = _touching_groups(sep, spacing, seed)
+    truth = np.concatenate([np.asarray(g) for g in groups])
+    rms = []
+    for passes in (0, 1):
+        det = extract_symbols(gray, ExtractionParams(refine_split=passes))
+        dist, _ = cKDTree(np.column_stack((det.u, det.v))).query(truth)
+        rms.append(float(np.sqrt(np.mean(dist ** 2))))
+    assert rms[1] <= rms[0] + 0.02, rms    # px; a 0.45 disc made it 1.2-2.2 px
+
+
 def test_blank_and_degenerate_images():
     for gray in (np.full((480, 640), 128, np.uint8), np.zeros((0, 0), np.uint8),
                  np.zeros((5, 5), np.uint8)):

@@ -79,6 +79,16 @@ class ExtractionParams:
     """Spacing assumed when fewer than two glyphs are found."""
     refine: bool = True
     """Refine single-glyph centres to the grey-weighted centroid of their patch."""
+    refine_split: int = 1
+    """Grey-weighted centroid passes for the glyphs split out of linked regions, 0 = none.
+    Their centres are those of a region's parts, which a dark blob of a touching object
+    merged with the glyph pulls aside; the centroid of the patch around them moves them
+    back (realistic noise and text objects: 3-D RMSE 0.0107 / 0.0117 -> 0.0098 / 0.0096 mm;
+    docs/robustness.md).  Each pass samples those patches again."""
+    split_centroid_radius: float = 0.3
+    """Disc radius, in patch sides, of that centroid: smaller than the single glyphs' 0.45 so
+    that a linked neighbour glyph (0.55-0.7 spacings away) stays outside; at 0.35 and above
+    it pulled linked glyph pairs' centres further off than no refinement."""
     rethreshold_large: bool = True
     """Look again inside regions too large to be glyphs, with a threshold from those
     regions' own pixels: a dark object touching the pad (seen through it between the glyphs)
@@ -217,6 +227,16 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
         du, dv = patch_centroid_offset(patches[:ns], params.dark_glyphs)
         uu[:ns] += du * step[:ns]
         vv[:ns] += dv * step[:ns]
+    if params.refine and params.refine_split > 0 and len(uu) > ns:
+        cut = slice(ns, len(uu))          # glyphs split out of linked regions
+        sub = patches[cut]
+        for _ in range(params.refine_split):
+            du, dv = patch_centroid_offset(sub, params.dark_glyphs,
+                                           params.split_centroid_radius)
+            uu[cut] += du * step[cut]
+            vv[cut] += dv * step[cut]
+            sub = sample_patches(gray, uu[cut], vv[cut], step[cut], params.patch_size)
+        patches[cut] = sub                 # the classifier sees them centred
     return Detections(uu, vv, aa, spacing, patches, local)
 
 
