@@ -80,16 +80,22 @@ def random_warp(rng: np.random.Generator, spacing: float, shape: tuple[int, int]
                 rng.uniform(50, 160), strength * rng.uniform(-0.25, 0.3))
 
 
+def _subpixel_grid(shape: tuple[int, int], supersample: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel coordinates of ``supersample`` x ``supersample`` samples per pixel (x, y grids)."""
+    h, w = shape
+    off = (np.arange(supersample) + 0.5) / supersample - 0.5
+    ys = (np.arange(h)[:, None] + off[None, :]).reshape(-1)
+    xs = (np.arange(w)[:, None] + off[None, :]).reshape(-1)
+    return np.meshgrid(xs, ys)
+
+
 def render(values: np.ndarray, warp: Warp, shape: tuple[int, int] = (480, 640), *,
            primitives: tuple[str, ...] = DEFAULT_PRIMITIVES, supersample: int = 3,
            glyph_scale: float = 1.0, ink: float = 40.0, paper: float = 200.0) -> np.ndarray:
     """Ink coverage (float32, 0..1) of the glyph array ``values`` seen through ``warp``."""
     h, w = shape
     s = supersample
-    off = (np.arange(s) + 0.5) / s - 0.5
-    ys = (np.arange(h)[:, None] + off[None, :]).reshape(-1)
-    xs = (np.arange(w)[:, None] + off[None, :]).reshape(-1)
-    gx, gy = np.meshgrid(xs, ys)
+    gx, gy = _subpixel_grid(shape, s)
     c, r = warp.to_cells(gx, gy)
     ci = np.rint(c).astype(np.int64)
     ri = np.rint(r).astype(np.int64)
@@ -162,10 +168,7 @@ def render_at(centres: np.ndarray, values: np.ndarray, pitch_px: float,
 
     h, w = shape
     s = supersample
-    off = (np.arange(s) + 0.5) / s - 0.5
-    ys = (np.arange(h)[:, None] + off[None, :]).reshape(-1)
-    xs = (np.arange(w)[:, None] + off[None, :]).reshape(-1)
-    gx, gy = np.meshgrid(xs, ys)
+    gx, gy = _subpixel_grid(shape, s)
     centres = np.asarray(centres, np.float64).reshape(-1, 2)
     dist, idx = cKDTree(centres).query(np.column_stack((gx.reshape(-1), gy.reshape(-1))))
     lx = (gx.reshape(-1) - centres[idx, 0]) / pitch_px
