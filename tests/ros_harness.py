@@ -62,6 +62,21 @@ def start_node(package: str, name: str, domain_id: int, ros_args: list[str],
                                 env=ros_env(domain_id), stdout=log, stderr=subprocess.STDOUT)
 
 
+def start_looping_sensor(domain_id: int, node_args: list[str], bag: pathlib.Path,
+                         log_dir: pathlib.Path, tag: str) -> list[subprocess.Popen]:
+    """A decoder (diagnostics every 0.5 s) fed by ``replay`` looping ``bag`` at half speed.
+
+    ``node_args`` (namespace remap, frame_prefix, ...) go to both; logs are
+    ``decoder_<tag>.log`` and ``replay_<tag>.log`` in ``log_dir``.
+    """
+    return [start_node("tactile_sl_decoder", "decoder", domain_id,
+                       [*node_args, "-p", "diagnostic_period:=0.5"],
+                       log_dir / f"decoder_{tag}.log"),
+            start_node("tactile_sl_camera", "replay", domain_id,
+                       [*node_args, "-p", f"bag:={bag}", "-p", "loop:=true", "-p", "rate:=0.5"],
+                       log_dir / f"replay_{tag}.log")]
+
+
 @dataclass
 class RunningNode:
     """A node process started by :func:`running_node`, with its captured stdout and stderr."""

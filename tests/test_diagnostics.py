@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 
-from ros_harness import BAGS, Probe, next_domain_id, start_node, stop
+from ros_harness import BAGS, Probe, next_domain_id, start_looping_sensor, stop
 
 pytestmark = pytest.mark.ros
 
@@ -60,13 +60,7 @@ def test_diagnostics_ok_on_a_good_bag_and_calibration_error_when_swapped(tmp_pat
         for name, bag in bags.items():
             domain = next_domain_id()
             listeners[name] = Listener(domain, name)
-            ns = ["-r", "__ns:=/tactile"]
-            procs.append(start_node("tactile_sl_decoder", "decoder", domain,
-                                    [*ns, "-p", "diagnostic_period:=0.5"],
-                                    tmp_path / f"decoder_{name}.log"))
-            procs.append(start_node("tactile_sl_camera", "replay", domain,
-                                    [*ns, "-p", f"bag:={bag}", "-p", "loop:=true",
-                                     "-p", "rate:=0.5"], tmp_path / f"replay_{name}.log"))
+            procs += start_looping_sensor(domain, ["-r", "__ns:=/tactile"], bag, tmp_path, name)
 
         def done(name: str) -> bool:
             arrays = listeners[name].arrays

@@ -14,7 +14,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
-from ros_harness import BAGS, Probe, next_domain_id, start_node, stop
+from ros_harness import BAGS, Probe, next_domain_id, start_looping_sensor, stop
 
 pytestmark = pytest.mark.ros
 
@@ -26,13 +26,8 @@ def test_two_sensors_in_two_namespaces_have_distinct_frames(tmp_path):
     domain = next_domain_id()
     procs = []
     for name in SENSORS:
-        ns = ["-r", f"__ns:=/{name}", "-p", f"frame_prefix:={name}_"]
-        procs.append(start_node("tactile_sl_decoder", "decoder", domain,
-                                [*ns, "-p", "diagnostic_period:=0.5"],
-                                tmp_path / f"decoder_{name}.log"))
-        procs.append(start_node("tactile_sl_camera", "replay", domain,
-                                [*ns, "-p", f"bag:={BAG}", "-p", "loop:=true",
-                                 "-p", "rate:=0.5"], tmp_path / f"replay_{name}.log"))
+        procs += start_looping_sensor(
+            domain, ["-r", f"__ns:=/{name}", "-p", f"frame_prefix:={name}_"], BAG, tmp_path, name)
     probe = Probe("several_sensors_test", domain)
     node, executor = probe.node, probe.executor
     got: dict[str, set[str]] = {f"{n}/{kind}": set() for n in SENSORS
