@@ -115,8 +115,8 @@ class Floor:
     opening) and connected components with statistics on both images, one batched classifier
     pass over every glyph patch of both images, the triangulation (rectification + linear
     least squares) of the cells both images decoded, and -- with touch outputs -- the touch
-    stage's two matrix-vector products (resultant and force map of
-    :meth:`~tactile_sl_decoder.touch.traction.TractionSolver.solve`).  ``serial`` runs it on
+    stage's two matrix-vector products (resultant and normal pressure map,
+    :meth:`~tactile_sl_decoder.touch.traction.TractionSolver.linear_products`).  ``serial`` runs it on
     one thread; ``parallel`` thresholds and labels the two images in two threads, as the
     pipeline's workers do.
     """
@@ -169,8 +169,7 @@ class Floor:
         t3 = time.perf_counter()
         if solver is not None and disp is not None:
             u = disp.reshape(-1)
-            solver._wrench_rows @ u                      # noqa: B018 (the product is timed)
-            solver._map @ u.astype(np.float32)           # noqa: B018
+            solver.linear_products(u, u.astype(np.float32))
         t4 = time.perf_counter()
         out = {"threshold+cc": t1 - t0, "classify": t2 - t1, "triangulate": t3 - t2,
                "touch mat-vec": t4 - t3, "floor": t4 - t0}

@@ -141,6 +141,17 @@ class TractionSolver:
         out[todo] = 0.0
         return out
 
+    def linear_products(self, u: np.ndarray, u32: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The two products every frame needs: resultant (6,) and normal pressure map (N,).
+
+        ``u`` is the flattened (3N,) displacement in float64 and ``u32`` the same in float32
+        (the map is stored in float32: it is memory-bound).  Everything else :meth:`solve`
+        does is per support cell; ``tools/bench_pipeline.py`` times these as the floor.
+        """
+        wrench = self._wrench_rows @ u
+        press = -(self._map_rows[2] @ u32).astype(np.float64)
+        return wrench, press
+
     def solve(self, disp: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per-cell forces (N, 3) N and the resultant (6,) = (F, M about the pad origin).
 
@@ -150,9 +161,8 @@ class TractionSolver:
         """
         disp = self._fill_missing(np.asarray(disp, np.float64), np.asarray(valid, bool))
         u = disp.reshape(-1)
-        wrench = self._wrench_rows @ u
         u32 = u.astype(np.float32)
-        press = -(self._map_rows[2] @ u32).astype(np.float64)
+        wrench, press = self.linear_products(u, u32)
         n = len(self.cells)
         forces = np.zeros((n, 3))
         self.last_support = np.zeros(n, bool)
