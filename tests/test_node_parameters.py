@@ -118,6 +118,7 @@ def test_live_changes_are_applied_or_refused_with_a_reason(tmp_path):
                               ({"classifier_threshold": 5.0}, "range"),
                               ({"extraction__block_size": 30}, "odd"),
                               ({"outliers__mad_factor": 0.1}, "range"),
+                              ({"carry__radius": 0.9}, "range"),
                               ({"contact_force_off": 50.0}, "must not exceed")]:
             (res,) = client.set(c, **change)
             assert not res.successful and words in res.reason, (change, res.reason)
@@ -126,6 +127,8 @@ def test_live_changes_are_applied_or_refused_with_a_reason(tmp_path):
         assert all(r.successful for r in client.set(c, max_reprojection_px=0.5, mirrored=True))
         (ok,) = client.set(c, outliers__passes=2)
         assert ok.successful and client.get(c, ["outliers.passes"]) == {"outliers.passes": 2}
+        (ok,) = client.set(c, carry__enabled=False)
+        assert ok.successful and client.get(c, ["carry.enabled"]) == {"carry.enabled": False}
         deadline = time.monotonic() + 10
         while "parameters applied: max_reprojection_px=0.5" not in \
                 (tmp_path / "decoder.log").read_text() and time.monotonic() < deadline:

@@ -4,6 +4,7 @@
     python tools/bench_pipeline.py                     # in-process timing + accuracy, all bags
     python tools/bench_pipeline.py --flip 0.05         # robustness: 5 % labels flipped
     python tools/bench_pipeline.py --ros --rate 30     # through DDS: decoder node at 30 Hz
+    python tools/bench_pipeline.py --sequence --carry both   # 60 Hz sequences, carry on/off
 
 In-process: median milliseconds per stereo pair with the per-stage breakdown (check,
 extraction, classification, lattice + decoding, stereo), over every frame of the bags,
@@ -18,6 +19,10 @@ of this design can avoid (threshold + connected components of both images, one b
 classifier pass over all their patches, triangulation of the matched cells, the touch
 stage's two matrix-vector products), on one thread and with the two images' labelling in
 two threads, and total / floor (see docs/decoder.md, "Floor and total / floor").
+Each bag runs from its first frame in bag order, once per repetition, so labels are carried
+from frame to frame as from a camera (--carry on, the default; off: every glyph classified
+every frame; both: the two alternate pass by pass). --sequence benchmarks the camera-rate
+sequences of bags/sequence_scenes.yaml instead (rendered into a temporary folder first).
 
 --flip R: after classification, each known label is flipped to another symbol with
 probability R (same pipeline otherwise); prints coverage and wrong cells with and without.
@@ -79,17 +84,35 @@ def _profile_label(args: argparse.Namespace) -> str:
 
 
 def _bags(args: argparse.Namespace) -> list[str]:
+    if args.sequence and not args.bags:
+        args.bags = _render_sequences()
     bags = args.bags or sorted(glob.glob(str(REPO / "bags" / "*.mcap")))
     if not bags:
         sys.exit("no bags: run `make bags` or pass bag paths")
     return bags
 
 
-def _pipeline(args: argparse.Namespace):
+def _render_sequences() -> list[str]:
+    """Render bags/sequence_scenes.yaml (camera-rate sequences) into a temporary folder."""
+    import atexit
+    import shutil
+
+    out = tempfile.mkdtemp(prefix="tactile_sl_sequences_")
+    atexit.register(shutil.rmtree, out, True)
+    exe = shutil.which("tactile-sl") or sys.exit("tactile-sl not found: source env.sh")
+    print(f"rendering {REPO / 'bags' / 'sequence_scenes.yaml'} (about 15 s per 45 frames)",
+          file=sys.stderr)
+    subprocess.run([exe, "synth", str(REPO / "bags" / "sequence_scenes.yaml"), "-o", out],
+                   check=True)
+    return sorted(glob.glob(os.path.join(out, "*.mcap")))
+
+
+def _pipeline(args: argparse.Namespace, carry: bool = True):
     from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 
     params = PipelineParams(threads=args.threads, cpu_threads=args.cpu_threads)
     params.decode.mirrored = args.mirrored
+    params.carry.enabled = carry
     return StereoPipeline(PatternSpec.load(args.pattern), None, params)
 
 
@@ -116,9 +139,9 @@ class Floor:
     pass over every glyph patch of both images, the triangulation (rectification + linear
     least squares) of the cells both images decoded, and -- with touch outputs -- the touch
     stage's two matrix-vector products (resultant and normal pressure map,
-    :meth:`~tactile_sl_decoder.touch.traction.TractionSolver.linear_products`).  ``serial`` runs it on
-    one thread; ``parallel`` thresholds and labels the two images in two threads, as the
-    pipeline's workers do.
+    :meth:`~tactile_sl_decoder.touch.traction.TractionSolver.linear_products`).  ``serial``
+    runs it on one thread; ``parallel`` thresholds and labels the two images in two
+    threads, as the pipeline's workers do.
     """
 
     def __init__(self, pipe, parallel: bool) -> None:
@@ -181,50 +204,76 @@ class Floor:
 
 
 def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script, top to bottom
-    """Per-stage timing over all frames, the floor, and the accuracy table."""
+    """Per-stage timing over all frames, the floor, and the accuracy table.
+
+    Each bag is run ``warmup + repeat`` times from its first frame, frames in bag order (as
+    a camera delivers them: labels carried from frame to frame, see classify/carry.py), a
+    fresh touch reference per pass.  With ``--carry both`` the pipeline with and without
+    carried labels alternate pass by pass, so their figures come from the same sitting.
+    """
     from tactile_sl_camera.images import to_gray
     from tactile_sl_decoder.frames import bag_frames
     from tactile_sl_decoder.tooling.e2e_metrics import aggregate, format_table, frame_metrics
 
     _set_threads(args.cpu_threads)
-    pipe = _pipeline(args)
-    floors = {"serial": Floor(pipe, parallel=False), "parallel": Floor(pipe, parallel=True)}
+    modes = ["on", "off"] if args.carry == "both" else [args.carry]
+    pipes = {m: _pipeline(args, carry=m == "on") for m in modes}
+    first = pipes[modes[0]]
+    floors = {"serial": Floor(first, parallel=False), "parallel": Floor(first, parallel=True)}
     stages = ("check", "extract", "knn", "classify", "workers", "decode", "stereo", "total")
-    timings: dict[str, list[float]] = {s: [] for s in stages + ("touch", "total+touch",
-                                                                  "cpu+touch")}
+    rows = list(stages) + (["touch", "total+touch", "cpu+touch"] if args.touch else [])
+    timings: dict[str, dict[str, list[float]]] = {m: {s: [] for s in rows} for m in modes}
+    carried: dict[str, list[float]] = {m: [] for m in modes}
     floor_t: dict[str, dict[str, list[float]]] = {k: {} for k in floors}
-    paired: dict[str, list[float]] = {"total": [], "total+touch": []}   # as the floors
-    tables = []
+    paired: dict[str, dict[str, list[float]]] = {m: {"total": [], "total+touch": []}
+                                                 for m in modes}   # as the floors
+    tables: dict[str, list] = {m: [] for m in modes}
     glyphs = []
     load0 = os.getloadavg()
     t_run = time.perf_counter()
     for bag in _bags(args):
-        frames = list(bag_frames(bag))
-        stage = _touch_stage(pipe) if args.touch else None
-        metrics = []
-        for fr in frames:
-            left, right = to_gray(fr.left_image), to_gray(fr.right_image)
-            for rep in range(args.warmup + args.repeat):
-                c0 = time.process_time()
-                t0 = time.perf_counter()
-                res = pipe.process(left, right, fr.left_info, fr.right_info)
-                t1 = time.perf_counter()
-                touch = _update(stage, res.points) if stage is not None else None
-                t2 = time.perf_counter()
-                c1 = time.process_time()
-                if rep < args.warmup:
-                    continue
-                for s in stages:
-                    timings[s].append(res.timings_ms.get(s, 0.0))
-                if stage is None or touch is not None:     # frames with touch outputs
-                    timings["touch"].append(1e3 * (t2 - t1))
-                    timings["total+touch"].append(1e3 * (t2 - t0))
-                    timings["cpu+touch"].append(1e3 * (c1 - c0))
-                    paired["total"].append(res.timings_ms["total"])
-                    paired["total+touch"].append(1e3 * (t2 - t0))
+        frames = [(fr, to_gray(fr.left_image), to_gray(fr.right_image))
+                  for fr in bag_frames(bag)]
+        for rep in range(args.warmup + args.repeat):
+            timed = rep >= args.warmup
+            last = rep == args.warmup + args.repeat - 1
+            for mode in (modes if rep % 2 else modes[::-1]):   # alternate which runs first
+                pipe = pipes[mode]
+                pipe.forget_frames()
+                stage = _touch_stage(pipe) if args.touch else None
+                metrics = []
+                for fr, left, right in frames:
+                    c0 = time.process_time()
+                    t0 = time.perf_counter()
+                    res = pipe.process(left, right, fr.left_info, fr.right_info)
+                    t1 = time.perf_counter()
+                    touch = _update(stage, res.points) if stage is not None else None
+                    t2 = time.perf_counter()
+                    c1 = time.process_time()
+                    if last and fr.ground_truth is not None:
+                        metrics.append(frame_metrics(res.points, fr.ground_truth,
+                                                     0.5 * pipe.pattern.pitch_m, fr.stamp_ns))
+                    if not timed:
+                        continue
+                    t = timings[mode]
+                    for s in stages:
+                        t[s].append(res.timings_ms.get(s, 0.0))
+                    n = len(res.left) + len(res.right)
+                    carried[mode].append(res.carried / n if n else 0.0)
+                    if mode == modes[0]:
+                        glyphs.append(n)
+                    if stage is not None and touch is None:
+                        continue                         # only frames with touch outputs
+                    if args.touch:
+                        t["touch"].append(1e3 * (t2 - t1))
+                        t["total+touch"].append(1e3 * (t2 - t0))
+                        t["cpu+touch"].append(1e3 * (c1 - c0))
+                    paired[mode]["total"].append(res.timings_ms["total"])
+                    paired[mode]["total+touch"].append(1e3 * (t2 - t0))
+                    if mode != modes[0]:
+                        continue
                     solver = stage.solver if stage is not None else None
                     disp = stage.last_solve[0] if stage is not None and stage.last_solve else None
-                    # the two floors alternate which runs first (cache warmth)
                     order = list(floors) if rep % 2 else list(floors)[::-1]
                     for name in order:
                         parts = floors[name](left, right, res, pipe.rig(fr.left_info,
@@ -232,23 +281,20 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
                                              solver, disp)
                         for k, v in parts.items():
                             floor_t[name].setdefault(k, []).append(v)
-            glyphs.append(len(res.left) + len(res.right))
-            if fr.ground_truth is not None:
-                metrics.append(frame_metrics(res.points, fr.ground_truth,
-                                             0.5 * pipe.pattern.pitch_m, fr.stamp_ns))
-        if metrics:
-            tables.append(aggregate(pathlib.Path(bag).stem, metrics))
+                if metrics:
+                    tables[mode].append(aggregate(pathlib.Path(bag).stem, metrics))
     load1 = os.getloadavg()
-    print(f"in-process, {len(timings['total'])} stereo pairs (median glyphs per pair "
+    n_pairs = len(timings[modes[0]]["total"])
+    print(f"in-process, {n_pairs} stereo pairs per setting (median glyphs per pair "
           f"{int(np.median(glyphs))}), threads={args.threads}, cpu_threads={args.cpu_threads}, "
           f"{time.perf_counter() - t_run:.0f} s; load average {load0[0]:.2f} before, "
           f"{load1[0]:.2f} after, on {os.cpu_count()} CPUs")
-    print(f"{'stage':<14} {'median ms':>10} {'p90 ms':>8} {'min ms':>8}")
-    rows = list(stages)
-    if args.touch:
-        rows += ["touch", "total+touch", "cpu+touch"]
-    for s in rows:
-        _row(s, timings[s])
+    for mode in modes:
+        print(f"labels carried from the previous frame: {mode} (median "
+              f"{100 * np.median(carried[mode]):.1f} % of the glyphs per pair)")
+        print(f"{'stage':<14} {'median ms':>10} {'p90 ms':>8} {'min ms':>8}")
+        for s in rows:
+            _row(s, timings[mode][s])
     which = "pairs with touch outputs" if args.touch else "all pairs"
     for name, parts in floor_t.items():
         print(f"floor, {name} ({'one thread' if name == 'serial' else 'two images in two threads'},"
@@ -256,19 +302,25 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
         for k, v in parts.items():
             if args.touch or k != "touch mat-vec":
                 _row("  " + k, v)
-    print(f"total / floor, {which} (ratio of medians; median of the per-pair ratios):")
+    print(f"total / floor, {which} (ratio of medians; median of the per-pair ratios; the "
+          f"floor measured beside carry {modes[0]}):")
     for name, parts in floor_t.items():
         fl = np.asarray(parts["floor"]) if parts else np.full(1, np.nan)
-        for label in (("total", "total+touch") if args.touch else ("total",)):
-            tot = np.asarray(paired[label])
-            print(f"  {label:<12} / floor {name:<8} {np.median(tot) / np.median(fl):>5.2f} "
-                  f"({np.median(tot / fl):.2f})")
-    if tables:
-        print()
-        format_table(tables)
+        for mode in modes:
+            for label in (("total", "total+touch") if args.touch else ("total",)):
+                tot = np.asarray(paired[mode][label])
+                ratio = (f"{np.median(tot / fl):.2f}" if len(tot) == len(fl)
+                         else "paired n/a")
+                print(f"  carry {mode:<3} {label:<12} / floor {name:<8} "
+                      f"{np.median(tot) / np.median(fl):>5.2f} ({ratio})")
+    for mode in modes:
+        if tables[mode]:
+            print(f"\naccuracy, carry {mode}:")
+            format_table(tables[mode])
     for f in floors.values():
         f.close()
-    pipe.close()
+    for pipe in pipes.values():
+        pipe.close()
     return 0
 
 
@@ -438,6 +490,11 @@ def main() -> int:
                    help="OpenCV / torch intra-op threads (0 = library defaults)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per frame")
     p.add_argument("--warmup", type=int, default=1, help="untimed runs per frame first")
+    p.add_argument("--carry", choices=("on", "off", "both"), default="on",
+                   help="labels carried from the previous frame (both: alternate passes)")
+    p.add_argument("--sequence", action="store_true",
+                   help="the camera-rate sequences of bags/sequence_scenes.yaml (rendered "
+                        "first) instead of the bundled bags")
     p.add_argument("--no-touch", dest="touch", action="store_false",
                    help="time the pipeline alone (default: also the touch stage, "
                    "TouchStage.update after every frame, as the node and replay)")

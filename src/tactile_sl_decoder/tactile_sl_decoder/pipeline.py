@@ -25,6 +25,7 @@ import numpy as np
 
 from tactile_sl_camera.camera_info import CameraInfoError
 from tactile_sl_camera.clouds import POINT_DTYPE, pack_points
+from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
 from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
@@ -42,6 +43,7 @@ class PipelineParams:
     decode: DecodeParams = field(default_factory=DecodeParams)
     stereo: StereoParams = field(default_factory=StereoParams)
     outliers: OutlierParams = field(default_factory=OutlierParams)
+    carry: CarryParams = field(default_factory=CarryParams)   # labels from the last frame
     extraction: Any = None          # tactile_sl_decoder.extract.extraction.ExtractionParams
     threads: int = 2                # >1: extract + classify left and right concurrently
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
@@ -61,6 +63,7 @@ class StereoResult:
     timings_ms: dict[str, float]
     rejected_pairs: int = 0        # cell pairs dropped by the stereo plausibility gates
     frame_id: str = ""
+    carried: int = 0               # glyphs (both images) labelled from the previous frame
 
 
 @dataclass
@@ -107,6 +110,8 @@ class StereoPipeline:
         self._extractor = extractor
         self._rig: StereoRig | None = None
         self._rig_key: tuple | None = None
+        # one per camera, sharing params.carry (live changes apply to both)
+        self._carry = (LabelCarry(self.params.carry), LabelCarry(self.params.carry))
         self._pool = None
         if self.params.threads > 1:
             self._pool = ThreadPoolExecutor(max_workers=2)
@@ -147,16 +152,64 @@ class StereoPipeline:
             return Glyphs.from_detections(det, gray.shape)
         return self._map(run, left_gray, right_gray)
 
-    def _extract_classify(self, job: tuple[np.ndarray, Any]
-                          ) -> tuple[Glyphs, float, float, float]:
+    def _carries(self) -> tuple[LabelCarry | None, LabelCarry | None]:
+        """The two cameras' label carries, or None when carrying is off (then forgotten)."""
+        if self.params.carry.enabled:
+            return self._carry
+        self.forget_frames()
+        return None, None
+
+    def forget_frames(self) -> None:
+        """Classify the next frame in full (no label carried from earlier frames)."""
+        for c in self._carry:
+            c.reset()
+
+    def _label(self, images: list[Glyphs], carries: list[LabelCarry | None]) -> int:
+        """Label the glyphs of one or more images (in place), one classifier batch.
+
+        With a :class:`LabelCarry` per image, glyphs that keep the previous frame's label
+        are not classified (classify/carry.py); the classifier sees the others only.
+        Returns the number of glyphs labelled from the previous frame.
+        """
+        work = [(g, c) for g, c in zip(images, carries) if len(g) and g.patches is not None]
+        for g, c in zip(images, carries):
+            if c is not None and not (len(g) and g.patches is not None):
+                c.reset()
+        if not work:
+            return 0
+        patches = [np.asarray(g.patches) for g, _ in work]
+        frames = [c.carry(g.u, g.v, p, g.spacing_px) if c is not None else None
+                  for (g, c), p in zip(work, patches)]
+        todo = [np.flatnonzero(~f.carried) if f is not None else slice(None) for f in frames]
+        batch = [p[t] for p, t in zip(patches, todo)]
+        sizes = [len(b) for b in batch]
+        label, conf = (self._classifier().predict(np.concatenate(batch)) if sum(sizes)
+                       else (np.zeros(0, np.uint8), np.zeros(0, np.float32)))
+        start = carried = 0
+        for (g, c), f, t, k in zip(work, frames, todo, sizes):
+            if f is None:
+                g.label = np.asarray(label[start:start + k], np.uint8)
+                g.confidence = np.asarray(conf[start:start + k], np.float32)
+            else:
+                g.label, g.confidence = f.label.copy(), f.confidence.copy()
+                g.label[t] = label[start:start + k]
+                g.confidence[t] = conf[start:start + k]
+                assert c is not None     # f is None exactly where c is
+                c.remember(f, g.label, g.confidence)
+                carried += int(f.carried.sum())
+            start += k
+        return carried
+
+    def _extract_classify(self, job: tuple[np.ndarray, Any, LabelCarry | None]
+                          ) -> tuple[Glyphs, int, float, float, float]:
         """One image's share of a worker: extract, find neighbours, rectify, classify.
 
-        ``job`` is (grey image, its CameraCalibration).  The k-NN table and the rectified
-        pixels of the glyph centres are kept with the glyphs for decoding and stereo.
-        Returns the glyphs and the extraction, k-NN (+ rectification) and classification
-        milliseconds.
+        ``job`` is (grey image, its CameraCalibration, its camera's LabelCarry or None).  The
+        k-NN table and the rectified pixels of the glyph centres are kept with the glyphs
+        for decoding and stereo.  Returns the glyphs, how many kept the previous frame's
+        label, and the extraction, k-NN (+ rectification) and classification milliseconds.
         """
-        gray, cam = job
+        gray, cam, carry = job
         t0 = time.perf_counter()
         det = self._extract(gray)
         g = Glyphs.from_detections(det, gray.shape)
@@ -164,32 +217,24 @@ class StereoPipeline:
         g.neighbours = self._neighbours(g)
         g.rectified = StereoRig.rectify(cam, np.column_stack([g.u, g.v]).astype(np.float64))
         t2 = time.perf_counter()
-        if len(g) and g.patches is not None:
-            label, conf = self._classifier().predict(g.patches)
-            g.label = np.asarray(label, np.uint8)
-            g.confidence = np.asarray(conf, np.float32)
-        return g, 1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (time.perf_counter() - t2)
+        carried = self._label([g], [carry])
+        return g, carried, 1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (time.perf_counter() - t2)
 
     def _neighbours(self, g: Glyphs) -> tuple[np.ndarray, np.ndarray]:
         """k-NN table of one image's glyphs (the lattice search's first step)."""
         return nearest_neighbours(g.u, g.v, self.params.grid.k_neighbours, g.spacing_px)
 
-    def classify_pair(self, left: Glyphs, right: Glyphs) -> None:
-        """Label both images' glyphs in one batch (in place)."""
-        n = len(left)
-        patches = [g.patches for g in (left, right) if g.patches is not None and len(g)]
-        if not patches:
-            return
-        classifier = self._classifier()
-        set_cpu_threads(self.params.cpu_threads)
-        label, conf = classifier.predict(np.concatenate(patches))
-        label = np.asarray(label, np.uint8)
-        conf = np.asarray(conf, np.float32)
-        if len(left) and left.patches is not None:
-            left.label, left.confidence = label[:n], conf[:n]
-            label, conf = label[n:], conf[n:]
-        if len(right) and right.patches is not None:
-            right.label, right.confidence = label, conf
+    def classify_pair(self, left: Glyphs, right: Glyphs,
+                      carries: tuple[LabelCarry | None, LabelCarry | None] = (None, None)
+                      ) -> int:
+        """Label both images' glyphs in one batch (in place), carrying labels if given.
+
+        Returns the number of glyphs labelled from the previous frame.
+        """
+        if any(len(g) and g.patches is not None for g in (left, right)):
+            self._classifier()
+            set_cpu_threads(self.params.cpu_threads)
+        return self._label([left, right], list(carries))
 
     def decode(self, glyphs: Glyphs) -> Glyphs:
         """Give each glyph of one image its cell (in place; returns it)."""
@@ -297,20 +342,24 @@ class StereoPipeline:
         if self._pool is None:
             left, right = self.extract_pair(left_gray, right_gray)
             t2 = time.perf_counter()
-            self.classify_pair(left, right)
+            carried = self.classify_pair(left, right, self._carries())
         else:
             # One worker per image: extraction, the lattice's k-NN search and classification
             # of that image (OpenCV, the k-d tree and the classifier's matrix products
             # release the GIL).  The stage times are then the slower worker's (overlapping).
             self._classifier()
             set_cpu_threads(self.params.cpu_threads)
-            (left, *ms_l), (right, *ms_r) = self._map(
-                self._extract_classify, (left_gray, rig.left), (right_gray, rig.right))
+            carry_l, carry_r = self._carries()
+            (left, carried_l, *ms_l), (right, carried_r, *ms_r) = self._map(
+                self._extract_classify, (left_gray, rig.left, carry_l),
+                (right_gray, rig.right, carry_r))
+            carried = carried_l + carried_r
             worker_ms = [max(a, b) for a, b in zip(ms_l, ms_r)]
         if label_hook is not None:
             label_hook(left, right)
         t3 = time.perf_counter()
         result = self._finish(left, right, rig)
+        result.carried = carried
         if self._pool is None:
             result.timings_ms.update(check=1e3 * (t1 - t0), extract=1e3 * (t2 - t1),
                                      classify=1e3 * (t3 - t2))

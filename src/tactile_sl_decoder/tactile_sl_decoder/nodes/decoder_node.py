@@ -127,6 +127,7 @@ class DecoderNode(Node):
             (0.01, 1000.0),
             apply=lambda v: setattr(params.stereo, "max_reprojection_px", float(v))))
         self._declare_outliers(decl, params)
+        self._declare_carry(decl, params)
         self.warn_period = float(decl("warn_period", 5.0,
             "Seconds between two warnings of the same kind (throttling).", (0.0, 3600.0),
             apply=lambda v: setattr(self, "warn_period", float(v))))
@@ -221,23 +222,46 @@ class DecoderNode(Node):
 
     def _declare_outliers(self, decl: Any, params: PipelineParams) -> None:
         """Live ``outliers.<field>`` parameters: the surface test of the stereo stage."""
-        o = params.outliers
-        what = "Surface outlier test (docs/robustness.md): "
-        spec = [("enabled", "drop points that leave the surface their lattice neighbours "
-                 "define.", None),
-                ("min_tolerance_m", "floor of a point's residual tolerance, m.", (1e-6, 0.01)),
-                ("mad_factor", "tolerance in robust standard deviations of the frame's "
-                 "residuals.", (0.5, 100.0)),
-                ("local_factor", "... or this many times the neighbours' median residual.",
-                 (0.5, 100.0)),
-                ("passes", "repeat with the dropped points removed, at most this often.",
-                 (1, 50))]
+        self._declare_group(decl, "outliers", params.outliers, "Surface outlier test "
+                            "(docs/robustness.md): ", [
+            ("enabled", "drop points that leave the surface their lattice neighbours "
+             "define.", None),
+            ("min_tolerance_m", "floor of a point's residual tolerance, m.", (1e-6, 0.01)),
+            ("mad_factor", "tolerance in robust standard deviations of the frame's "
+             "residuals.", (0.5, 100.0)),
+            ("local_factor", "... or this many times the neighbours' median residual.",
+             (0.5, 100.0)),
+            ("passes", "repeat with the dropped points removed, at most this often.",
+             (1, 50))])
+
+    def _declare_carry(self, decl: Any, params: PipelineParams) -> None:
+        """Live ``carry.<field>`` parameters: labels kept from the previous frame."""
+        self._declare_group(decl, "carry", params.carry, "Labels carried from the previous "
+                            "frame (input=images; docs/decoder.md, 'Temporal coherence'): ", [
+            ("enabled", "a glyph where a glyph was one frame earlier, looking the same, "
+             "keeps its label instead of being classified again (off: every glyph is "
+             "classified every frame).", None),
+            ("radius", "largest distance from the previous glyph's predicted position, in "
+             "glyph spacings.", (0.05, 0.5)),
+            ("min_correlation", "smallest correlation of the two glyph patches.",
+             (0.5, 1.0)),
+            ("min_confidence", "smallest confidence of the label carried.", (0.0, 1.0)),
+            ("refresh_frames", "every glyph is classified again after at most this many "
+             "frames.", (1, 1000))])
+
+    def _declare_group(self, decl: Any, prefix: str, target: Any, what: str,
+                       spec: list[tuple[str, str, tuple | None]]) -> None:
+        """One live ``<prefix>.<field>`` parameter per entry of ``spec`` on ``target``.
+
+        ``target`` is the params dataclass the pipeline reads (``params.<prefix>``); a change
+        is written to the pipeline's own copy, so the next frame uses it.
+        """
         for name, text, value_range in spec:
-            kind = type(getattr(o, name))
-            setattr(o, name, kind(decl(
-                f"outliers.{name}", getattr(o, name), what + text, value_range,
-                apply=lambda v, n=name, k=kind: setattr(self.pipeline.params.outliers, n,
-                                                        k(v)))))
+            kind = type(getattr(target, name))
+            setattr(target, name, kind(decl(
+                f"{prefix}.{name}", getattr(target, name), what + text, value_range,
+                apply=lambda v, n=name, k=kind: setattr(
+                    getattr(self.pipeline.params, prefix), n, k(v)))))
 
     def _diagnostic_limits(self) -> DiagnosticLimits:
         """One live ``diagnostics.<field>`` parameter per DiagnosticLimits threshold."""

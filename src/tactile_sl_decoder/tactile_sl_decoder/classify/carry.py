@@ -1,0 +1,172 @@
+"""Labels carried from the previous frame: classify only the glyphs that need it (no rclpy).
+
+At 30-60 Hz consecutive frames of one camera differ by a fraction of a glyph spacing, so
+most glyphs sit where a glyph sat one frame earlier and look the same.  Such a glyph keeps
+that glyph's label instead of going through the classifier, which is the largest share of a
+frame's unavoidable work.  A glyph keeps a label only when *all* of these hold:
+
+* the previous glyph was labelled with confidence >= ``min_confidence`` (doubtful labels are
+  classified again);
+* the previous glyph's predicted position (its position one frame earlier plus the step it
+  made then: constant velocity) is the nearest one to it, within ``radius`` glyph spacings,
+  and no other glyph of this frame has that one as its nearest;
+* its patch correlates with the previous glyph's patch by at least ``min_correlation``
+  (the correlation coefficient of template matching, J. P. Lewis, "Fast Normalized
+  Cross-Correlation", Vision Interface 1995, over the central part of the patch where the
+  glyph is).  On clean renders the same glyph in two
+  frames correlates at >= 0.96 (99.9 % of glyphs), glyphs of different classes at <= 0.86,
+  so the threshold sits between them: a glyph that changed its look (a jump, an object
+  sliding over it, a lighting change) is classified again;
+* it has been carried fewer than ``refresh_frames`` frames in a row: every glyph is
+  classified again regularly, spread over the frames (not all in one).
+
+Only *labels* are carried, never cells: every frame is decoded from its labels by the full
+window search, so the M-array's checks (votes, lattice consistency, islands) judge carried
+labels exactly like fresh ones, and a wrong carried label is one misread glyph that its
+windows correct or drop.  Positions are matched after the worker's extraction, in the same
+thread, per camera; the state is one frame of one camera (:class:`LabelCarry`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from tactile_sl_decoder.contract import LABEL_UNKNOWN
+
+CROP = 3   # pixels left out on each side of a patch for the correlation (the glyph's ring)
+
+
+@dataclass
+class CarryParams:
+    """When a glyph keeps the label of the glyph at its place in the previous frame."""
+
+    enabled: bool = True
+    radius: float = 0.3           # x glyph spacing, around the predicted position
+    min_correlation: float = 0.93  # patch correlation with the previous glyph's patch
+    min_confidence: float = 0.9   # the previous label's confidence
+    refresh_frames: int = 8       # classified again after at most this many carried frames
+
+    def validate(self) -> "CarryParams":
+        """Raise ValueError for settings outside their ranges."""
+        if not 0.0 < self.radius <= 0.5:
+            raise ValueError(f"carry radius must be in (0, 0.5] spacings, got {self.radius}")
+        if not -1.0 <= self.min_correlation <= 1.0:
+            raise ValueError(f"carry min_correlation must be in [-1, 1], got "
+                             f"{self.min_correlation}")
+        if not 0.0 <= self.min_confidence <= 1.0:
+            raise ValueError(f"carry min_confidence must be in [0, 1], got "
+                             f"{self.min_confidence}")
+        if self.refresh_frames < 1:
+            raise ValueError(f"carry refresh_frames must be >= 1, got {self.refresh_frames}")
+        return self
+
+
+def normalised_patches(patches: np.ndarray) -> np.ndarray:
+    """(N, s, s) uint8 -> (N, (s - 2 CROP)^2) float32, zero mean and unit norm per patch."""
+    n = len(patches)
+    core = patches[:, CROP:patches.shape[1] - CROP, CROP:patches.shape[2] - CROP]
+    x = core.reshape(n, -1).astype(np.float32)
+    x -= x.mean(axis=1, keepdims=True)
+    norm = np.linalg.norm(x, axis=1, keepdims=True)
+    x /= np.maximum(norm, 1e-6)
+    return x
+
+
+@dataclass
+class _Frame:
+    """What one camera's previous frame leaves for the next one."""
+
+    predicted: np.ndarray     # (N, 2) where each glyph is expected next frame, px
+    position: np.ndarray      # (N, 2) where it was, px
+    label: np.ndarray         # (N,) uint8
+    confidence: np.ndarray    # (N,) float32
+    carried_for: np.ndarray   # (N,) int: frames the label has been carried (0: classified)
+    patches: np.ndarray       # (N, d) normalised_patches
+    spacing_px: float
+    tree: cKDTree | None = None
+
+
+@dataclass
+class Carried:
+    """One frame's glyphs matched to the previous frame (:meth:`LabelCarry.carry`)."""
+
+    carried: np.ndarray      # (N,) bool: label and confidence come from the previous frame
+    label: np.ndarray        # (N,) uint8, LABEL_UNKNOWN where not carried
+    confidence: np.ndarray   # (N,) float32, 0 where not carried
+    source: np.ndarray       # (N,) int64: the previous frame's glyph at this place, or -1
+    position: np.ndarray     # (N, 2) float64 glyph centres, px
+    patches: np.ndarray      # (N, d) normalised_patches
+    spacing_px: float
+
+
+class LabelCarry:
+    """Per camera: label glyphs from the previous frame where that is safe (see module doc)."""
+
+    def __init__(self, params: CarryParams | None = None) -> None:
+        self.params = params if params is not None else CarryParams()
+        self._prev: _Frame | None = None
+
+    def reset(self) -> None:
+        """Forget the previous frame (the next frame is classified in full)."""
+        self._prev = None
+
+    def carry(self, u: np.ndarray, v: np.ndarray, patches: np.ndarray, spacing_px: float
+              ) -> Carried:
+        """Match this frame's glyphs (centres, (N, s, s) patches) to the previous frame's."""
+        p = self.params
+        n = len(u)
+        pos = np.column_stack([u, v]).astype(np.float64)
+        normed = normalised_patches(patches)
+        out = Carried(np.zeros(n, bool), np.full(n, LABEL_UNKNOWN, np.uint8),
+                      np.zeros(n, np.float32), np.full(n, -1, np.int64), pos, normed,
+                      float(spacing_px))
+        prev = self._prev
+        if out.spacing_px <= 0 and prev is not None:
+            out.spacing_px = prev.spacing_px
+        if not p.enabled or prev is None or n == 0 or len(prev.label) == 0 or \
+                out.spacing_px <= 0:
+            return out
+        if prev.tree is None:
+            prev.tree = cKDTree(prev.predicted)
+        dist, j = prev.tree.query(pos, distance_upper_bound=p.radius * out.spacing_px)
+        cand = np.flatnonzero(np.isfinite(dist))
+        j = j[cand]
+        # one glyph per previous glyph (two glyphs this close: one of them is no glyph)
+        unique = np.bincount(j, minlength=len(prev.label))[j] == 1
+        cand, j = cand[unique], j[unique]
+        if len(cand) == 0:
+            return out
+        out.source[cand] = j
+        keep = ((prev.label[j] != LABEL_UNKNOWN) & (prev.confidence[j] >= p.min_confidence)
+                & (prev.carried_for[j] + 1 < p.refresh_frames))
+        cand, j = cand[keep], j[keep]
+        corr = np.einsum("ij,ij->i", normed[cand], prev.patches[j])
+        keep = corr >= p.min_correlation
+        cand, j = cand[keep], j[keep]
+        out.carried[cand] = True
+        out.label[cand] = prev.label[j]
+        out.confidence[cand] = prev.confidence[j]
+        return out
+
+    def remember(self, frame: Carried, label: np.ndarray, confidence: np.ndarray) -> None:
+        """Keep this frame, with its final labels and confidences, for the next one."""
+        prev = self._prev
+        n = len(label)
+        carried_for = np.zeros(n, np.int64)
+        velocity = np.zeros((n, 2))
+        if prev is not None:
+            has = frame.source >= 0
+            j = frame.source[has]
+            carried_for[has] = prev.carried_for[j] + 1
+            velocity[has] = frame.position[has] - prev.position[j]
+        # Classified glyphs start again at 0; glyphs new at their place at staggered counts,
+        # so that after a full classification the refresh is spread over the next frames.
+        carried_for[~frame.carried] = 0
+        new = np.flatnonzero(frame.source < 0)
+        carried_for[new] = new % self.params.refresh_frames
+        self._prev = _Frame(frame.position + velocity, frame.position,
+                            np.asarray(label, np.uint8).copy(),
+                            np.asarray(confidence, np.float32).copy(), carried_for,
+                            frame.patches, frame.spacing_px)

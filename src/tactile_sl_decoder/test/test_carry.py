@@ -1,0 +1,151 @@
+"""Labels carried from the previous frame (classify/carry.py) and the pipeline using them."""
+import numpy as np
+import pytest
+
+from tactile_sl_camera.images import to_gray
+from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry
+from tactile_sl_decoder.contract import LABEL_UNKNOWN, PATCH_SIZE
+from tactile_sl_decoder.frames import bag_frames
+from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+
+from ros_harness import REPO
+
+BAG = REPO / "bags" / "sphere_deep_small.mcap"
+
+
+@pytest.fixture(scope="module")
+def frames():
+    """(left grey, right grey, left info, right info, ground truth) of the bag's frames."""
+    return [(to_gray(f.left_image), to_gray(f.right_image), f.left_info, f.right_info)
+            for f in bag_frames(BAG)]
+
+
+def _pipelines(carry_on_params: CarryParams | None = None):
+    off = PipelineParams(threads=1)
+    off.carry.enabled = False
+    on = PipelineParams(threads=2)
+    on.carry = carry_on_params or CarryParams()
+    spec = PatternSpec.load()
+    return StereoPipeline(spec, params=off), StereoPipeline(spec, params=on)
+
+
+def _lattice_step(result) -> np.ndarray:
+    """Median pixel step from a decoded glyph to the one at the next column (left image)."""
+    g = result.left
+    key = {(int(r), int(c)): i for i, (r, c) in enumerate(zip(g.row, g.col)) if r >= 0}
+    steps = [(g.u[j] - g.u[i], g.v[j] - g.v[i]) for (r, c), i in key.items()
+             if (j := key.get((r, c + 1))) is not None]
+    return np.median(np.asarray(steps), axis=0)
+
+
+def test_static_frames_keep_their_labels_and_points(frames):
+    off, on = _pipelines()
+    first = on.process(*frames[0])
+    assert first.carried == 0                       # nothing to carry from
+    again = on.process(*frames[0])
+    fresh = off.process(*frames[0])
+    n = len(again.left) + len(again.right)
+    # all but the glyphs due for their regular re-classification (1 in refresh_frames)
+    assert again.carried >= 0.8 * n
+    np.testing.assert_array_equal(again.left.label, fresh.left.label)
+    np.testing.assert_array_equal(again.right.label, fresh.right.label)
+    assert again.points.tobytes() == fresh.points.tobytes()
+    on.close()
+    off.close()
+
+
+def test_jumps_loops_and_one_glyph_shifts_give_the_points_of_no_carrying(frames):
+    """Carrying never changes a cell: a whole-pitch shift, a sudden press, a loop back."""
+    off, on = _pipelines()
+    base = off.process(*frames[0])
+    step = _lattice_step(base)
+    shift = np.rint(step).astype(int)
+    assert 10 <= abs(shift[0]) <= 30             # one glyph spacing along the columns
+
+    def shifted(frame, by):
+        left, right, li, ri = frame
+        return (np.roll(left, (by[1], by[0]), axis=(0, 1)),
+                np.roll(right, (by[1], by[0]), axis=(0, 1)), li, ri)
+
+    half = np.rint(0.5 * step).astype(int)
+    sequence = [frames[0], frames[0], shifted(frames[0], shift), frames[0], frames[3],
+                frames[3], frames[0], shifted(frames[0], half), frames[6], frames[6]]
+    carried = []
+    for frame in sequence:
+        a, b = off.process(*frame), on.process(*frame)
+        assert a.points.tobytes() == b.points.tobytes()
+        carried.append(b.carried)
+    assert carried[1] > 0 and carried[5] > 0 and carried[9] > 0
+    on.close()
+    off.close()
+
+
+def _patch(kind: str) -> np.ndarray:
+    p = np.full((PATCH_SIZE, PATCH_SIZE), 200, np.uint8)
+    c = PATCH_SIZE // 2
+    if kind == "line":
+        p[c - 1:c + 2, 4:PATCH_SIZE - 4] = 30
+    elif kind == "circle":
+        yy, xx = np.mgrid[:PATCH_SIZE, :PATCH_SIZE]
+        ring = np.abs(np.hypot(yy - c + 0.5, xx - c + 0.5) - 4.5) < 1.3
+        p[ring] = 30
+    elif kind == "triangle":
+        for r in range(5, 13):
+            half = (r - 5) // 2 + 1
+            p[r, c - half:c + half] = 30
+    return p
+
+
+def test_a_glyph_that_moved_too_far_or_changed_its_look_is_classified_again():
+    carry = LabelCarry(CarryParams(refresh_frames=100))
+    u = np.array([20.0, 40.0, 60.0, 80.0])
+    v = np.full(4, 30.0)
+    patches = np.stack([_patch(k) for k in ("line", "circle", "triangle", "line")])
+    first = carry.carry(u, v, patches, 20.0)
+    assert not first.carried.any()
+    carry.remember(first, np.array([0, 1, 2, 0], np.uint8), np.full(4, 0.99, np.float32))
+    # glyph 1 now looks like a line, glyph 2 moved 0.4 spacings, glyph 3 was unknown before
+    now = patches.copy()
+    now[1] = _patch("line")
+    nxt = carry.carry(u + np.array([1.0, 0.0, 8.0, 0.5]), v, now, 20.0)
+    assert nxt.carried.tolist() == [True, False, False, True]
+    assert nxt.label[0] == 0 and nxt.label[1] == LABEL_UNKNOWN
+    # a label below min_confidence is not carried either
+    carry.remember(nxt, np.array([0, 0, 2, 0], np.uint8),
+                   np.array([0.99, 0.99, 0.99, 0.5], np.float32))
+    third = carry.carry(u + np.array([1.0, 0.0, 8.0, 0.5]), v, now, 20.0)
+    assert third.carried.tolist() == [True, True, True, False]
+
+
+def test_every_glyph_is_classified_again_within_refresh_frames():
+    refresh = 4
+    carry = LabelCarry(CarryParams(refresh_frames=refresh))
+    n = 40
+    u = np.tile(np.arange(8) * 20.0, 5)
+    v = np.repeat(np.arange(5) * 20.0, 8)
+    patches = np.stack([_patch(("line", "circle", "triangle")[i % 3]) for i in range(n)])
+    label = (np.arange(n) % 3).astype(np.uint8)
+    classified = []
+    for _ in range(3 * refresh):
+        frame = carry.carry(u, v, patches, 20.0)
+        classified.append(~frame.carried)
+        carry.remember(frame, label, np.full(n, 0.99, np.float32))
+    seen = np.asarray(classified)
+    for start in range(1, len(seen) - refresh + 1):   # any refresh consecutive frames
+        assert seen[start:start + refresh].any(axis=0).all()
+    # spread out: no frame after the first classifies more than about 1 / refresh of them
+    assert seen[1:].sum(axis=1).max() <= n // refresh + 1
+
+
+def test_carry_off_classifies_everything(frames):
+    off, _ = _pipelines()
+    off.process(*frames[0])
+    assert off.process(*frames[0]).carried == 0
+    off.close()
+
+
+@pytest.mark.parametrize("bad", [dict(radius=0.0), dict(radius=0.6), dict(min_correlation=1.5),
+                                 dict(min_confidence=-0.1), dict(refresh_frames=0)])
+def test_carry_params_out_of_range_are_refused(bad):
+    with pytest.raises(ValueError):
+        CarryParams(**bad).validate()
