@@ -10,6 +10,8 @@ stamp. A frame is dropped if no cloud with its stamp arrives. Figures, not a pas
     python tools/bench_graph.py --rate 6 --seconds 60    # 60 Hz
     python tools/bench_graph.py --rate 3 --seconds 60 --sensors 2
     python tools/bench_graph.py --rate 6 --seconds 600   # resident memory over 10 min
+    tactile-sl synth bags/sequence_scenes.yaml -o /tmp/seq  # a 60 Hz press (45 frames)
+    python tools/bench_graph.py --bag /tmp/seq/press_60hz.mcap --rate 1 --seconds 60
 
 Also printed: CPU use of every decoder and replay process over the run (per cent of one
 CPU) and their resident memory when the first cloud arrives and at the end.
@@ -39,11 +41,24 @@ sys.path.insert(0, str(REPO / "tests"))
 from ros_harness import executable, ros_env, stop  # noqa: E402
 
 
+def _frame_rate(bag: pathlib.Path) -> float:
+    """Stereo frames per second of a bag, from its left images' log times."""
+    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_decoder.frames import bag_topics
+
+    topic = bag_topics()["left_image"]
+    times = [m.log_time_ns for m in BagReader(bag).raw_messages([topic])]
+    if len(times) < 2 or times[-1] <= times[0]:
+        return 10.0
+    return (len(times) - 1) / ((times[-1] - times[0]) * 1e-9)
+
+
 def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, report
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--bag", type=pathlib.Path, default=REPO / "bags" / "two_contacts.mcap")
     parser.add_argument("--rate", type=float, default=3.0,
-                        help="replay rate multiplier (the bags are 10 Hz: 3.0 = 30 Hz)")
+                        help="replay rate multiplier of the bag's frame rate (the bundled "
+                             "bags are 10 Hz: 3.0 = 30 Hz)")
     parser.add_argument("--loops", type=int, default=43, help="passes over the bag")
     parser.add_argument("--seconds", type=float, default=0.0,
                         help="play this long instead (sets --loops from the bag's frames)")
@@ -64,8 +79,9 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
         parser.error("--sensors must be 1..8")
     args.logs.mkdir(parents=True, exist_ok=True)
     frames_per_pass = count_bag_frames(args.bag)
+    bag_hz = _frame_rate(args.bag)
     if args.seconds > 0:
-        args.loops = max(1, math.ceil(args.seconds * 10.0 * args.rate / frames_per_pass))
+        args.loops = max(1, math.ceil(args.seconds * bag_hz * args.rate / frames_per_pass))
     expected = frames_per_pass * args.loops
     spaces = ["/tactile"] if args.sensors == 1 else [f"/sensor{i}" for i in range(args.sensors)]
 
@@ -129,7 +145,7 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
                 stderr=subprocess.STDOUT)
             procs[f"replay {ns}"] = replay
             replays.append(replay)
-        deadline = time.monotonic() + 60 + expected / (10.0 * args.rate) * 3
+        deadline = time.monotonic() + 60 + expected / (bag_hz * args.rate) * 3
         next_sample = time.monotonic()
         while time.monotonic() < deadline:
             if (not samples["start"] and first_cloud[0] is not None
@@ -153,7 +169,7 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
         rclpy.shutdown(context=context)
     what = "extractor -> classifier -> decoder chain" if args.chain else "decoder"
     print(f"replay -> {what} over loopback DDS, {len(spaces)} sensor(s): {expected} stereo "
-          f"frames of {args.bag.name} each at {10.0 * args.rate:.0f} Hz, Fast DDS profile "
+          f"frames of {args.bag.name} each at {bag_hz * args.rate:.0f} Hz, Fast DDS profile "
           f"{os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE') or 'none'}, load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
     received = 0
