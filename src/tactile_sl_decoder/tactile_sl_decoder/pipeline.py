@@ -30,6 +30,7 @@ from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
 from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
 from tactile_sl_decoder.decode.grid import GridParams, build_grid, nearest_neighbours
+from tactile_sl_decoder.decode.track import carried_cells, verify_carried_cells
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
 from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig, match_and_triangulate
@@ -64,6 +65,7 @@ class StereoResult:
     rejected_pairs: int = 0        # cell pairs dropped by the stereo plausibility gates
     frame_id: str = ""
     carried: int = 0               # glyphs (both images) labelled from the previous frame
+    tracked: bool = False          # cells carried from the previous frame (no window search)
 
 
 @dataclass
@@ -112,6 +114,8 @@ class StereoPipeline:
         self._rig_key: tuple | None = None
         # one per camera, sharing params.carry (live changes apply to both)
         self._carry = (LabelCarry(self.params.carry), LabelCarry(self.params.carry))
+        self._prev_cells: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
+        self._full_decode_in = 0     # frames until the window search runs regardless
         self._pool = None
         if self.params.threads > 1:
             self._pool = ThreadPoolExecutor(max_workers=2)
@@ -160,9 +164,11 @@ class StereoPipeline:
         return None, None
 
     def forget_frames(self) -> None:
-        """Classify the next frame in full (no label carried from earlier frames)."""
+        """Classify and decode the next frame in full (nothing carried from earlier frames)."""
         for c in self._carry:
             c.reset()
+        self._prev_cells = [None, None]
+        self._full_decode_in = 0
 
     def _label(self, images: list[Glyphs], carries: list[LabelCarry | None]) -> int:
         """Label the glyphs of one or more images (in place), one classifier batch.
@@ -238,19 +244,26 @@ class StereoPipeline:
 
     def decode(self, glyphs: Glyphs) -> Glyphs:
         """Give each glyph of one image its cell (in place; returns it)."""
-        return self.decode_many([glyphs])[0]
+        self.decode_many([glyphs])
+        return glyphs
 
-    def decode_many(self, images: list[Glyphs]) -> list[Glyphs]:
-        """Decode the glyphs of several images in one pass (in place; returns them).
+    def decode_many(self, images: list[Glyphs],
+                    carried: list[np.ndarray] | None = None) -> bool:
+        """Decode the glyphs of several images in one pass (in place).
 
         The images' glyphs are laid side by side, far apart, and go through one lattice
         search and one decoding call: the cost of these is mostly per numpy operation, so
         this is much cheaper than one call per image, and the result is the same (nothing
         links glyphs of different images; cells are unique per image).
+
+        ``carried``: per image, each glyph's cell carried from the previous frame (flat, -1
+        none; :mod:`.decode.track`).  If this frame's lattice and labels confirm every one
+        of them, the glyphs take them and the window search is skipped; returns whether it
+        was (else the frame was decoded in full).
         """
         sizes = [len(g) for g in images]
         if sum(sizes) == 0:
-            return images
+            return False
         offsets = []
         shift = 0.0
         for g in images:
@@ -274,14 +287,46 @@ class StereoPipeline:
             start += n
         grid = build_grid(u, v, self.params.grid, max(hints) if hints else 0.0,
                           neighbours=(np.concatenate(dists), np.concatenate(idxs)))
-        res = self.decoder.decode(grid, label, conf, groups)
+        tracked = False
+        if carried is not None:
+            cell = np.concatenate(carried)
+            ok = verify_carried_cells(grid.nbr, cell, label, conf, self.codebook.array,
+                                      self.params.decode.mirrored,
+                                      min_confidence=self.params.decode.min_confidence,
+                                      groups=groups)
+            tracked = bool(np.all(ok | (cell == -1)))
+        if tracked:
+            cols = self.codebook.cols
+            row = np.where(cell >= 0, cell // cols, -1).astype(np.int32)
+            col = np.where(cell >= 0, cell % cols, -1).astype(np.int32)
+        else:
+            res = self.decoder.decode(grid, label, conf, groups)
+            row, col = res.row, res.col
         start = 0
         for g, n in zip(images, sizes):
-            g.row, g.col = res.row[start:start + n], res.col[start:start + n]
+            g.row, g.col = row[start:start + n], col[start:start + n]
             if g.spacing_px <= 0:
                 g.spacing_px = grid.spacing_px
             start += n
-        return images
+        return tracked
+
+    def _carried_cells(self, images: list[Glyphs]) -> list[np.ndarray] | None:
+        """Cells carried from the previous frame per image, or None: decode in full.
+
+        In full when cells are not carried, every ``refresh_frames`` frames, or when a glyph
+        has no glyph of the previous frame at its place (new, or moved too far).
+        """
+        p = self.params.carry
+        if not (p.enabled and p.cells) or self._full_decode_in <= 0:
+            return None
+        out = []
+        for g, carry, prev in zip(images, self._carry, self._prev_cells):
+            last = carry.last
+            if prev is None or last is None or len(last.source) != len(g) or np.any(
+                    last.source < 0):
+                return None
+            out.append(carried_cells(last.source, prev[0], prev[1], self.codebook.cols))
+        return out
 
     def decode_pair(self, left: Glyphs, right: Glyphs) -> None:
         """Decode both images of a stereo frame (one joint pass)."""
@@ -358,7 +403,7 @@ class StereoPipeline:
         if label_hook is not None:
             label_hook(left, right)
         t3 = time.perf_counter()
-        result = self._finish(left, right, rig)
+        result = self._finish(left, right, rig, track=True)
         result.carried = carried
         if self._pool is None:
             result.timings_ms.update(check=1e3 * (t1 - t0), extract=1e3 * (t2 - t1),
@@ -399,15 +444,30 @@ class StereoPipeline:
         result.timings_ms["total"] = 1e3 * (time.perf_counter() - t0)
         return result
 
-    def _finish(self, left: Glyphs, right: Glyphs, rig: StereoRig) -> StereoResult:
+    def _finish(self, left: Glyphs, right: Glyphs, rig: StereoRig,
+                track: bool = False) -> StereoResult:
+        """Decode, pair and triangulate.
+
+        ``track``: the frames of a camera stream (images path), whose cells may be carried
+        from the frame before (:meth:`decode_many`).
+        """
         t0 = time.perf_counter()
-        self.decode_pair(left, right)
+        tracked = False
+        if track:
+            tracked = self.decode_many([left, right], self._carried_cells([left, right]))
+            self._prev_cells = [(g.row, g.col) for g in (left, right)]
+            self._full_decode_in = (self._full_decode_in - 1 if tracked
+                                    else self.params.carry.refresh_frames - 1)
+        else:
+            self.decode_pair(left, right)
         t1 = time.perf_counter()
         points, rejected = self.triangulate(left, right, rig)
         t2 = time.perf_counter()
-        return StereoResult(points, left, right,
-                            {"decode": 1e3 * (t1 - t0), "stereo": 1e3 * (t2 - t1)},
-                            rejected, rig.frame_id)
+        result = StereoResult(points, left, right,
+                              {"decode": 1e3 * (t1 - t0), "stereo": 1e3 * (t2 - t1)},
+                              rejected, rig.frame_id)
+        result.tracked = tracked
+        return result
 
     def close(self) -> None:
         """Stop the worker thread."""

@@ -55,7 +55,11 @@ def test_static_frames_keep_their_labels_and_points(frames):
 
 
 def test_jumps_loops_and_one_glyph_shifts_give_the_points_of_no_carrying(frames):
-    """Carrying never changes a cell: a whole-pitch shift, a sudden press, a loop back."""
+    """Carrying never changes a cell: a whole-pitch shift, a sudden press, a loop back.
+
+    Labels and cells (decode/track.py) are carried where they can be; the points must be
+    those of a pipeline that classifies and decodes every frame in full.
+    """
     off, on = _pipelines()
     base = off.process(*frames[0])
     step = _lattice_step(base)
@@ -70,12 +74,17 @@ def test_jumps_loops_and_one_glyph_shifts_give_the_points_of_no_carrying(frames)
     half = np.rint(0.5 * step).astype(int)
     sequence = [frames[0], frames[0], shifted(frames[0], shift), frames[0], frames[3],
                 frames[3], frames[0], shifted(frames[0], half), frames[6], frames[6]]
-    carried = []
+    carried, tracked = [], []
     for frame in sequence:
         a, b = off.process(*frame), on.process(*frame)
         assert a.points.tobytes() == b.points.tobytes()
         carried.append(b.carried)
+        tracked.append(b.tracked)
     assert carried[1] > 0 and carried[5] > 0 and carried[9] > 0
+    # cells carried on the repeated frame, never across a shift by one or half a spacing
+    # (there or back); after the press they may be, where the lattice confirms every cell
+    assert tracked[1], tracked
+    assert not any(tracked[i] for i in (0, 2, 3, 7)), tracked
     on.close()
     off.close()
 
@@ -149,3 +158,52 @@ def test_carry_off_classifies_everything(frames):
 def test_carry_params_out_of_range_are_refused(bad):
     with pytest.raises(ValueError):
         CarryParams(**bad).validate()
+
+
+def _lattice(rows=8, cols=10, r0=5, c0=7, spacing=16.0):
+    """A perfect lattice of glyphs showing the shipped pattern's cells r0.., c0.. ."""
+    from tactile_sl_decoder.decode.grid import build_grid
+
+    pattern = PatternSpec.load().array
+    rr, cc = np.mgrid[0:rows, 0:cols]
+    u = 40.0 + spacing * cc.ravel()
+    v = 30.0 + spacing * rr.ravel()
+    grid = build_grid(u, v)
+    cell = (rr.ravel() + r0) * pattern.shape[1] + cc.ravel() + c0
+    label = pattern[rr.ravel() + r0, cc.ravel() + c0].astype(np.uint8)
+    return grid, cell, label, np.full(len(cell), 0.99, np.float32), pattern
+
+
+def test_carried_cells_are_confirmed_only_where_label_and_neighbours_agree():
+    from tactile_sl_decoder.decode.track import verify_carried_cells
+
+    grid, cell, label, conf, pattern = _lattice()
+    assert verify_carried_cells(grid.nbr, cell, label, conf, pattern).all()
+    # every cell one column off (a jump by one spacing): the labels give it away
+    ok = verify_carried_cells(grid.nbr, cell + 1, label, conf, pattern)
+    assert ok.mean() < 0.5
+    # one glyph with a wrong cell: it fails, and so do its neighbours (they disagree)
+    bad = cell.copy()
+    i = 3 * 10 + 4
+    bad[i] = cell[i] + 2 * pattern.shape[1] + 3
+    label_bad = label.copy()
+    label_bad[i] = pattern.ravel()[bad[i]]             # even with a label that fits it
+    ok = verify_carried_cells(grid.nbr, bad, label_bad, conf, pattern)
+    assert not ok[i] and not ok[i + 1] and not ok[i - 10]
+    # a cell carried to two glyphs; an unknown label; mirrored artwork reverses columns
+    dup = cell.copy()
+    dup[0] = dup[1]
+    assert not verify_carried_cells(grid.nbr, dup, label, conf, pattern)[[0, 1]].any()
+    unknown = label.copy()
+    unknown[5] = LABEL_UNKNOWN
+    assert not verify_carried_cells(grid.nbr, cell, unknown, conf, pattern)[5]
+    assert not verify_carried_cells(grid.nbr, cell, label, conf, pattern, mirrored=True).any()
+
+
+def test_carried_cells_come_from_the_matched_previous_glyph():
+    from tactile_sl_decoder.decode.track import carried_cells
+
+    prev_row = np.array([2, -1, 4], np.int32)
+    prev_col = np.array([3, -1, 5], np.int32)
+    out = carried_cells(np.array([2, -1, 0, 1]), prev_row, prev_col, cols=10)
+    assert out.tolist() == [45, -1, 23, -1]

@@ -20,11 +20,12 @@ frame's unavoidable work.  A glyph keeps a label only when *all* of these hold:
 * it has been carried fewer than ``refresh_frames`` frames in a row: every glyph is
   classified again regularly, spread over the frames (not all in one).
 
-Only *labels* are carried, never cells: every frame is decoded from its labels by the full
-window search, so the M-array's checks (votes, lattice consistency, islands) judge carried
-labels exactly like fresh ones, and a wrong carried label is one misread glyph that its
-windows correct or drop.  Positions are matched after the worker's extraction, in the same
-thread, per camera; the state is one frame of one camera (:class:`LabelCarry`).
+Cells are carried separately (:mod:`tactile_sl_decoder.decode.track`, from ``source``, the
+match made here): only when this frame's lattice and labels confirm every carried cell is
+the window search skipped; otherwise the frame is decoded from its labels in full, and the
+M-array's checks (votes, lattice consistency, islands) judge carried labels exactly like
+fresh ones.  Positions are matched after the worker's extraction, in the same thread, per
+camera; the state is one frame of one camera (:class:`LabelCarry`).
 """
 from __future__ import annotations
 
@@ -47,6 +48,7 @@ class CarryParams:
     min_correlation: float = 0.93  # patch correlation with the previous glyph's patch
     min_confidence: float = 0.9   # the previous label's confidence
     refresh_frames: int = 8       # classified again after at most this many carried frames
+    cells: bool = True            # cells too, when this frame's lattice confirms all of them
 
     def validate(self) -> "CarryParams":
         """Raise ValueError for settings outside their ranges."""
@@ -107,10 +109,12 @@ class LabelCarry:
     def __init__(self, params: CarryParams | None = None) -> None:
         self.params = params if params is not None else CarryParams()
         self._prev: _Frame | None = None
+        self.last: Carried | None = None    # the latest frame's match (its ``source``)
 
     def reset(self) -> None:
         """Forget the previous frame (the next frame is classified in full)."""
         self._prev = None
+        self.last = None
 
     def carry(self, u: np.ndarray, v: np.ndarray, patches: np.ndarray, spacing_px: float
               ) -> Carried:
@@ -123,6 +127,7 @@ class LabelCarry:
                       np.zeros(n, np.float32), np.full(n, -1, np.int64), pos, normed,
                       float(spacing_px))
         prev = self._prev
+        self.last = out
         if out.spacing_px <= 0 and prev is not None:
             out.spacing_px = prev.spacing_px
         if not p.enabled or prev is None or n == 0 or len(prev.label) == 0 or \

@@ -247,7 +247,10 @@ class DecoderNode(Node):
              (0.5, 1.0)),
             ("min_confidence", "smallest confidence of the label carried.", (0.0, 1.0)),
             ("refresh_frames", "every glyph is classified again after at most this many "
-             "frames.", (1, 1000))])
+             "frames, and every frame decoded in full after at most this many.", (1, 1000)),
+            ("cells", "cells too: when this frame's lattice and labels confirm the cell of "
+             "every glyph matched to the previous frame, the window search is skipped.",
+             None)])
 
     def _declare_group(self, decl: Any, prefix: str, target: Any, what: str,
                        spec: list[tuple[str, str, tuple | None]]) -> None:
