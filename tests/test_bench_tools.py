@@ -1,13 +1,18 @@
-"""The benchmark scripts still run (figures are not checked: they are machine-dependent)."""
+"""The benchmark scripts still run (figures are not checked: they are machine-dependent).
+
+They are scripts started as processes, so this lives with the process tests (no ROS graph:
+the in-process benchmark only).
+"""
 import subprocess
 import sys
 
 import pytest
 
-from ros_harness import REPO
+from ros_harness import REPO, next_domain_id, ros_env
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
-@pytest.mark.slow
 def test_bench_pipeline_in_process_runs_with_floor_touch_and_both_carry_settings():
     """A short in-process run on one bag: every section is printed (a renamed attribute
     once broke the floor's touch products and with them `make bench`)."""
@@ -15,7 +20,7 @@ def test_bench_pipeline_in_process_runs_with_floor_touch_and_both_carry_settings
         [sys.executable, str(REPO / "tools" / "bench_pipeline.py"),
          str(REPO / "bags" / "no_contact.mcap"), "--repeat", "1", "--warmup", "0",
          "--carry", "both"],
-        capture_output=True, text=True, timeout=300)
+        capture_output=True, text=True, timeout=300, env=ros_env(next_domain_id()))
     assert out.returncode == 0, out.stderr[-3000:]
     for section in ("labels carried from the previous frame: on",
                     "labels carried from the previous frame: off",
