@@ -277,3 +277,19 @@ def test_centroid_is_not_pulled_by_uneven_light(seed):
     # +0.003: a few patches whose border is no plane keep the flat mean)
     assert rms[True, True] - rms[False, True] < 0.4 * added_flat, rms
     assert rms[True, True] < rms[True, False] - 0.015, rms
+
+
+def test_the_extractor_config_lists_every_extraction_parameter_with_its_default():
+    """config/symbol_extractor.yaml shows users every knob (it once missed seven)."""
+    import dataclasses
+
+    import yaml
+
+    from ros_harness import REPO
+
+    doc = yaml.safe_load((REPO / "src" / "tactile_sl_decoder" / "config" /
+                          "symbol_extractor.yaml").read_text())
+    values = doc["/**/symbol_extractor"]["ros__parameters"]
+    for f in dataclasses.fields(ExtractionParams):
+        assert f.name in values, f.name
+        assert values[f.name] == f.default, (f.name, values[f.name], f.default)
