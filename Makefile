@@ -50,6 +50,7 @@ bench: setup
 	@$(ENV) python tools/bench_extraction.py --bag bags/sphere_deep_small.mcap
 	@$(ENV) python tools/bench_pipeline.py
 	@$(ENV) python tools/bench_pipeline.py --flip 0.05
+	@$(ENV) python tools/bench_pipeline.py --sequence --carry both
 	@$(ENV) python tools/bench_pipeline.py --ros --rate 30 --seconds 10
 	@$(ENV) python tools/bench_graph.py
 	@$(ENV) python tools/bench_calibration.py
