@@ -189,7 +189,10 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
                   f"from {args.warmup:g} s after the first cloud on ({t1 - t0:.0f} s); "
                   f"resident memory {rss0:.1f} MB then, {rss1:.1f} MB at the end "
                   f"({rss1 - rss0:+.1f} MB)")
-    return 0 if received == expected * len(spaces) else 1
+    # Figures, not a verdict: dropped frames are reported above; only a graph that
+    # delivered nothing at all (a node that did not start) is an error, so that
+    # `make bench` goes on to its other benchmarks on machines that drop frames.
+    return 0 if received > 0 else 1
 
 
 def _sample(procs: dict[str, subprocess.Popen]) -> dict[str, tuple[float, float, float]]:
