@@ -184,6 +184,7 @@ class Sweep:
             seed = self.seed + 101 * level + frame
             f = renderer.render(frame_contacts(frame), nz, seed=seed, frame_index=frame)
             rig = StereoRig(renderer.rig.left_info, renderer.rig.right_info)
+            self.pipeline.forget_frames()    # each frame is a scene of its own, not a stream
             t0 = time.perf_counter()
             res = self.pipeline.process(f.left, f.right, rig, rig)
             out.ms.append(1e3 * (time.perf_counter() - t0))

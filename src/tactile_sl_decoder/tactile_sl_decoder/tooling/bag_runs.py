@@ -62,6 +62,7 @@ def evaluate_bag(path: str | Path, pipeline: Any, namespace: str = "/tactile",
     tol = match_tol_m if match_tol_m is not None else (0.5 * pitch if pitch > 0 else 2.5e-4)
     total = count_bag_frames(path, namespace)
     frames: list[FrameMetrics] = []
+    pipeline.forget_frames()       # a bag is a stream of its own: nothing from the last one
     for i, frame in enumerate(bag_frames(path, namespace)):
         if max_frames and i >= max_frames:
             break
@@ -102,6 +103,7 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
     name = Path(path).stem
     total = count_bag_frames(path, namespace)
     out: list[TouchFrameMetrics] = []
+    pipeline.forget_frames()       # a bag is a stream of its own: nothing from the last one
     for i, frame in enumerate(bag_frames(path, namespace, ground_truth=False)):
         if max_frames and i >= max_frames:
             break
