@@ -30,7 +30,7 @@ from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
 from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
 from tactile_sl_decoder.decode.grid import GridParams, build_grid, nearest_neighbours
-from tactile_sl_decoder.decode.track import carried_cells, verify_carried_cells
+from tactile_sl_decoder.decode.track import carried_cells
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
 from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig, match_and_triangulate
@@ -290,10 +290,7 @@ class StereoPipeline:
         tracked = False
         if carried is not None:
             cell = np.concatenate(carried)
-            ok = verify_carried_cells(grid.nbr, cell, label, conf, self.codebook.array,
-                                      self.params.decode.mirrored,
-                                      min_confidence=self.params.decode.min_confidence,
-                                      groups=groups)
+            ok = self.decoder.confirm(grid, cell, label, conf, groups)
             tracked = bool(np.all(ok | (cell == -1)))
         if tracked:
             cols = self.codebook.cols

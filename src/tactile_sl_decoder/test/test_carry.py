@@ -175,9 +175,15 @@ def _lattice(rows=8, cols=10, r0=5, c0=7, spacing=16.0):
 
 
 def test_carried_cells_are_confirmed_only_where_label_and_neighbours_agree():
-    from tactile_sl_decoder.decode.track import verify_carried_cells
+    from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
 
     grid, cell, label, conf, pattern = _lattice()
+    codebook = Codebook(pattern, (3, 3), 3, 3)
+    decoders = {m: CodewordDecoder(codebook, DecodeParams(mirrored=m)) for m in (False, True)}
+
+    def verify_carried_cells(nbr, cell, label, conf, pattern, mirrored=False):
+        assert nbr is grid.nbr
+        return decoders[mirrored].confirm(grid, cell, label, conf)
     assert verify_carried_cells(grid.nbr, cell, label, conf, pattern).all()
     # every cell one column off (a jump by one spacing): the labels give it away
     ok = verify_carried_cells(grid.nbr, cell + 1, label, conf, pattern)

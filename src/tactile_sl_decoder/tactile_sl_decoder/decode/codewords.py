@@ -383,6 +383,41 @@ class CodewordDecoder:
         col[has] = c.astype(np.int32)
         return Decoded(row, col, votes_out, windows_decoded)
 
+    def confirm(self, grid: Grid, cell: np.ndarray, labels: np.ndarray,
+                confidence: np.ndarray, groups: np.ndarray | None = None,
+                min_agree: int = 2) -> np.ndarray:
+        """Which glyphs this frame confirms in a given cell (bool (N,); False where -1).
+
+        ``cell`` (N,): a candidate cell per glyph (flat ``row * cols + col`` of the pattern,
+        -1 = none), e.g. carried from the previous frame (:mod:`.track`).  Confirmed: the
+        glyph's label (known, confidence >= ``min_confidence``) is the pattern's symbol
+        there, at least ``min_agree`` of its lattice neighbours hold candidates that imply
+        the same cell and none implies another (the decoder's consistency rule), and no
+        other glyph of its image has the same candidate.
+        """
+        cb, p = self.codebook, self.params
+        n = grid.nbr.shape[0]
+        groups = (np.zeros(n, dtype=np.int64) if groups is None
+                  else np.asarray(groups, dtype=np.int64).reshape(-1))
+        lay, values = self._layout(int(groups.max()) + 1 if n else 1)
+        cell = np.asarray(cell, np.int64)
+        has = cell >= 0
+        internal = np.where(has, lay.encode(groups, cell // cb.cols, cell % cb.cols), -1)
+        nbr = grid.nbr
+        if p.mirrored:   # image columns run opposite to pattern columns
+            nbr = nbr.reshape(n, 3, 3)[:, :, ::-1].reshape(n, 9)
+        lab = np.where(np.asarray(confidence) >= p.min_confidence,
+                       np.asarray(labels).astype(np.int64), -2)
+        ok = has & (values[np.maximum(internal, 0)] == lab)
+        cj, implied = self._expected(nbr, internal, lay)
+        known = cj >= 0
+        agree = (known & (implied == internal[:, None])).sum(axis=1)
+        disagree = (known & (implied != internal[:, None])).sum(axis=1)
+        ok &= (agree >= min_agree) & (disagree == 0)
+        claims = np.bincount(internal[has], minlength=lay.size)
+        ok &= ~(has & (claims[np.maximum(internal, 0)] > 1))
+        return ok
+
     @staticmethod
     def _expected(nbr: np.ndarray, cell: np.ndarray, lay: _Layout,
                   links: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
