@@ -113,6 +113,7 @@ class StereoPipeline:
         self._rig: StereoRig | None = None
         self._rig_key: tuple | None = None
         # one per camera, sharing params.carry (live changes apply to both)
+        self.params.carry.validate()
         self._carry = (LabelCarry(self.params.carry), LabelCarry(self.params.carry))
         self._prev_cells: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
         self._full_decode_in = 0     # frames until the window search runs regardless

@@ -213,3 +213,10 @@ def test_carried_cells_come_from_the_matched_previous_glyph():
     prev_col = np.array([3, -1, 5], np.int32)
     out = carried_cells(np.array([2, -1, 0, 1]), prev_row, prev_col, cols=10)
     assert out.tolist() == [45, -1, 23, -1]
+
+
+def test_a_pipeline_refuses_carry_settings_out_of_range():
+    params = PipelineParams(threads=1)
+    params.carry.refresh_frames = 0
+    with pytest.raises(ValueError, match="refresh_frames"):
+        StereoPipeline(PatternSpec.load(), params=params)
