@@ -15,7 +15,11 @@ replay's code) and compares the points with the renderer's ground truth:
   speck) decoded to their cell and triangulated within half a pitch of the truth;
 * wrong: output points at a wrong cell, or farther than half a pitch from their cell's
   true centre (e2e_metrics' definition), among all output points, damaged glyphs included;
-* RMSE: 3-D error of the correct points of undamaged glyphs.
+* RMSE: 3-D error of the correct points of undamaged glyphs;
+* labels: the classifier's output on the detections of undamaged glyphs (each matched to
+  the nearest true glyph within a quarter spacing, both images): share read right and share
+  read *confidently wrong* (a misread the decoder must correct; below the confidence
+  threshold a label is unknown, neither).
 
 Figures, not pass/fail; the acceptance limits of issue 11 are printed next to them.
 """
@@ -135,6 +139,9 @@ class RowFigures:
     wrong: int = 0
     errors: list[np.ndarray] = field(default_factory=list)
     ms: list[float] = field(default_factory=list)
+    labelled: int = 0        # detections of undamaged glyphs matched to their true glyph
+    labels_right: int = 0
+    labels_misread: int = 0  # confident and wrong
 
     def summary(self) -> dict[str, float]:
         err = np.concatenate(self.errors) if self.errors else np.zeros(0)
@@ -143,20 +150,28 @@ class RowFigures:
                 "coverage": self.correct / self.visible if self.visible else float("nan"),
                 "wrong_rate": self.wrong / self.points if self.points else 0.0,
                 "rmse_m": float(np.sqrt(np.mean(err ** 2))) if len(err) else float("nan"),
+                "labels_right": self.labels_right / self.labelled if self.labelled else 0.0,
+                "labels_misread": (self.labels_misread / self.labelled if self.labelled
+                                   else 0.0),
                 "ms": float(np.median(self.ms)) if self.ms else float("nan")}
 
 
 class Sweep:
     """Renderers per glyph spacing, one pipeline, the ground-truth comparison."""
 
-    def __init__(self, frames: int, seed: int) -> None:
+    def __init__(self, frames: int, seed: int, weights: str | None = None) -> None:
         from tactile_sl_camera.sim.artwork import load_artwork
         from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 
         self.frames, self.seed = frames, seed
         self.artwork = load_artwork()
         self.pattern = PatternSpec.load()
-        self.pipeline = StereoPipeline(self.pattern, params=PipelineParams(threads=1))
+        self.pipeline = StereoPipeline(self.pattern, params=PipelineParams(
+            threads=1, classifier_weights=weights))
+        from tactile_sl_decoder.tooling.training import DEFAULT_PRIMITIVES, artwork_values
+
+        # every cell's symbol read from the rendered artwork (the pattern's, by construction)
+        self.values = artwork_values(self.artwork, DEFAULT_PRIMITIVES)
         self._renderers: dict[float, Any] = {}
 
     def renderer(self, spacing: float) -> Any:
@@ -206,13 +221,29 @@ class Sweep:
             out.visible += fm.visible
             out.correct += fm.correct
             out.errors.append(fm.errors_m)
+            self._count_labels(out, res, t, undamaged)
         return out
+
+    def _count_labels(self, out: RowFigures, res: Any, truth: Any, undamaged: np.ndarray
+                      ) -> None:
+        """Add the classifier's right and confidently wrong labels of one frame to ``out``."""
+        from tactile_sl_decoder.glyphs import LABEL_UNKNOWN
+        from tactile_sl_decoder.tooling.training import label_detections
+
+        values = self.values[truth.rows[undamaged], truth.cols[undamaged]]
+        for glyphs, px in ((res.left, truth.px_left), (res.right, truth.px_right)):
+            chosen, true_label = label_detections(glyphs, px[undamaged], values)
+            label = glyphs.label[chosen]
+            out.labelled += len(chosen)
+            out.labels_right += int((label == true_label).sum())
+            out.labels_misread += int(((label != true_label) & (label != LABEL_UNKNOWN)).sum())
 
 
 def table(results: list[tuple[str, str, dict[str, float]]]) -> str:
     """Markdown table of the sweep rows."""
-    lines = ["| nuisance | level | visible | coverage | wrong | wrong % | 3-D RMSE | ms/pair |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| nuisance | level | visible | coverage | wrong | wrong % | 3-D RMSE "
+             "| labels right | misread | ms/pair |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for name, level, s in results:
         limits = ACCEPT.get(level)
         flag = ""
@@ -224,7 +255,8 @@ def table(results: list[tuple[str, str, dict[str, float]]]) -> str:
             flag = " **(fails)**" if fails else ""
         lines.append(f"| {name} | {level}{flag} | {s['visible']} | {100 * s['coverage']:.2f} % "
                      f"| {s['wrong']} | {100 * s['wrong_rate']:.3f} % "
-                     f"| {1e3 * s['rmse_m']:.4f} mm | {s['ms']:.1f} |")
+                     f"| {1e3 * s['rmse_m']:.4f} mm | {100 * s['labels_right']:.2f} % "
+                     f"| {100 * s['labels_misread']:.2f} % | {s['ms']:.1f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -244,6 +276,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--levels", nargs="*", default=list(LEVEL_NAMES), choices=LEVEL_NAMES)
     ap.add_argument("--frames", type=int, default=4, help="stereo frames per row")
     ap.add_argument("--seed", type=int, default=5)
+    ap.add_argument("--weights", default=None,
+                    help="classifier weights (default: the shipped ones), e.g. to compare")
     ap.add_argument("--no-write", action="store_true", help="do not update docs/robustness.md")
     ap.add_argument("--json", default=None, help="also write the figures as JSON")
     args = ap.parse_args(argv)
@@ -253,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
         if unknown:
             ap.error(f"unknown nuisance(s) {', '.join(unknown)}; known: {', '.join(rows)}")
         rows = [r for r in rows if r in args.only]
-    sweep = Sweep(args.frames, args.seed)
+    sweep = Sweep(args.frames, args.seed, args.weights)
     results: list[tuple[str, str, dict[str, float]]] = []
     t0 = time.time()
     for name in rows:
@@ -263,7 +297,9 @@ def main(argv: list[str] | None = None) -> int:
             results.append((name, level_name, s))
             print(f"{name:15s} {level_name:9s} coverage {100 * s['coverage']:6.2f} %  "
                   f"wrong {s['wrong']:3d} ({100 * s['wrong_rate']:.3f} %)  "
-                  f"rmse {1e3 * s['rmse_m']:.4f} mm", file=sys.stderr, flush=True)
+                  f"rmse {1e3 * s['rmse_m']:.4f} mm  labels right "
+                  f"{100 * s['labels_right']:.2f} % misread {100 * s['labels_misread']:.2f} %",
+                  file=sys.stderr, flush=True)
     text = table(results)
     print(text)
     print(f"({len(results)} rows, {args.frames} stereo frames each, {time.time() - t0:.0f} s)",

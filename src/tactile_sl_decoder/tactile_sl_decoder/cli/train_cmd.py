@@ -19,10 +19,10 @@ def register(subparsers: Any) -> None:
         "extract glyphs, label them from the ground truth and train the LeNet classifier. "
         "Held-out frames use other seeds and other indenter kinds. Writes the weights "
         "(default: the ones the package ships) and a model card next to them.")
-    p.add_argument("--frames", type=number(int, 1, 100_000), default=80,
-                   help="training stereo frames (default 80)")
-    p.add_argument("--val-frames", type=number(int, 1, 100_000), default=16,
-                   help="held-out stereo frames (default 16)")
+    p.add_argument("--frames", type=number(int, 1, 100_000), default=160,
+                   help="training stereo frames (default 160)")
+    p.add_argument("--val-frames", type=number(int, 1, 100_000), default=24,
+                   help="held-out stereo frames (default 24)")
     p.add_argument("--epochs", type=number(int, 1, 10_000), default=12,
                    help="passes over the data (default 12)")
     p.add_argument("--seed", type=number(int, 0, 2**31 - 1), default=1,
@@ -97,8 +97,13 @@ def run(args: argparse.Namespace) -> int:
             f"{args.seed + 7919}, indenters {', '.join(HELDOUT_KINDS)}); 0-2 indenters per "
             "frame with random radius, depth, position, shear; random blur, read and shot "
             "noise, vignetting, light position, gradient, gamma, exposure and shadows (30 % "
-            "harsh). Glyphs found by `extract_symbols`, labelled by the nearest ground-truth "
-            "cell within a quarter spacing (value read from the artwork). Training adds patch "
+            "harsh); on 60 % of the frames also the nuisances of real sensors (an object seen "
+            "through the pad: dark, striped, noisy or printed; MJPEG quality 45-95, defocus, "
+            "motion blur, exposure differing between the cameras and from frame to frame, "
+            "dropout, wear, scratches, bubbles, dust; each on some of those frames) and a glyph "
+            "spacing of 12-24 px. Glyphs found by `extract_symbols`, labelled by the nearest "
+            "ground-truth cell within a quarter spacing (value read from the artwork); damaged "
+            "glyphs (worn, scratched, under a bubble or dust) are left out. Training adds patch "
             "augmentation: rotation +-15 deg, scale +-15 %, anisotropy +-15 %, shear +-0.15, "
             "shift +-1.2 px, "
             "gamma, contrast, offset, blur, noise.")

@@ -33,7 +33,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
-from tactile_sl_decoder.decode.grid import Grid, window_indices
+from tactile_sl_decoder.decode.grid import NEIGHBOUR_SLOTS, OFFSETS, Grid, window_indices
 
 DIRECT_TABLE_MAX = 1 << 22   # code spaces up to this size are looked up by direct address
 
@@ -216,9 +216,8 @@ class Codebook:
         return cell
 
 
-_OTHERS = np.array([o for o in range(9) if o != 4])
-_DR = _OTHERS // 3 - 1
-_DC = _OTHERS % 3 - 1
+_DR = OFFSETS[NEIGHBOUR_SLOTS, 0]
+_DC = OFFSETS[NEIGHBOUR_SLOTS, 1]
 
 
 @dataclass
@@ -264,7 +263,7 @@ class _Layout:
 
 def _links(nbr: np.ndarray) -> np.ndarray:
     """The 8 neighbours of every glyph, (N, 8), N where there is none (a sentinel slot)."""
-    j = nbr[:, _OTHERS]
+    j = nbr[:, NEIGHBOUR_SLOTS]
     return np.where(j >= 0, j, len(nbr))
 
 
@@ -470,7 +469,7 @@ class CodewordDecoder:
         ok = (implied == cell[:, None]) & (cell[:, None] >= 0)
         # CSR straight from the neighbour table (8 slots per glyph; no link = self loop);
         # float64 weights and int32 indices are what csgraph works in (no conversion copies).
-        indices = np.where(ok, grid.nbr[:, _OTHERS], np.arange(n)[:, None]).astype(np.int32)
+        indices = np.where(ok, grid.nbr[:, NEIGHBOUR_SLOTS], np.arange(n)[:, None]).astype(np.int32)
         graph = csr_matrix((np.ones(8 * n), indices.reshape(-1),
                             np.arange(0, 8 * n + 1, 8, dtype=np.int32)), shape=(n, n))
         _, comp = connected_components(graph, directed=False)

@@ -205,15 +205,15 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     return Grid(nbr, col_vec, row_vec, spacing, pts)
 
 
-_OTHERS = np.array([o for o in range(9) if o != CENTRE])
-_REVERSE = 8 - _OTHERS                            # the opposite neighbour's column
+NEIGHBOUR_SLOTS = np.array([o for o in range(9) if o != CENTRE])  # nbr columns of the 8 neighbours
+_REVERSE = 8 - NEIGHBOUR_SLOTS                    # the opposite neighbour's column
 _DIAG = np.array([0, 2, 6, 8])                    # (dr, dc) = (-1, -1), (-1, 1), (1, -1), (1, 1)
 _DIAG_VIA_ROW = 3 * (OFFSETS[_DIAG, 0] + 1) + 1   # column of (dr, 0)
 _DIAG_VIA_COL = 3 + OFFSETS[_DIAG, 1] + 1         # column of (0, dc)
 _DIAG_THEN_COL = _DIAG_VIA_COL
 _DIAG_THEN_ROW = _DIAG_VIA_ROW
-_ODC = OFFSETS[_OTHERS, 1].astype(np.float64)     # (8,) column step of each neighbour
-_ODR = OFFSETS[_OTHERS, 0].astype(np.float64)     # (8,) row step
+_ODC = OFFSETS[NEIGHBOUR_SLOTS, 1].astype(np.float64)  # (8,) column step of each neighbour
+_ODR = OFFSETS[NEIGHBOUR_SLOTS, 0].astype(np.float64)  # (8,) row step
 
 
 def _assign(du: np.ndarray, dv: np.ndarray, idx: np.ndarray, valid: np.ndarray,
@@ -248,7 +248,7 @@ def _assign(du: np.ndarray, dv: np.ndarray, idx: np.ndarray, valid: np.ndarray,
     # Neighbour table with a sentinel row n (all -1): a missing link (-1) indexes it.
     nbr = np.full((n + 1, 9), -1, dtype=np.int64)
     nbr[:n, CENTRE] = rows
-    nbr[:n, _OTHERS] = np.where(links >= 0, found, -1)
+    nbr[:n, NEIGHBOUR_SLOTS] = np.where(links >= 0, found, -1)
     _mutual(nbr)
     # Diagonals must agree with both two-step paths that exist (the four diagonals read
     # only the 4-neighbour columns, which this step does not change: all at once).
@@ -302,7 +302,7 @@ def _match_fast(du: np.ndarray, dv: np.ndarray, du32: np.ndarray, dv32: np.ndarr
     b = np.rint((dv32 * c0.astype(f32) - du32 * c1.astype(f32)) * inv)   # row steps
     code = 3 * b + a + 4                                          # 3 * (dr + 1) + (dc + 1)
     ok = valid & (np.abs(a) <= 1) & (np.abs(b) <= 1) & (code != CENTRE)
-    slot = np.where(ok, code - (code > CENTRE), 0).astype(np.intp)   # 0..7 (_OTHERS order)
+    slot = np.where(ok, code - (code > CENTRE), 0).astype(np.intp)   # 0..7 (NEIGHBOUR_SLOTS order)
     flat = slot + (np.arange(n) * 8)[:, None]
     eu = du32 - pred_u.reshape(-1)[flat]
     eu *= eu
@@ -328,10 +328,10 @@ def _mutual(nbr: np.ndarray) -> None:
     the same as one offset after the other, since a link and its reverse are judged alike.
     """
     n = len(nbr) - 1
-    j = nbr[:n, _OTHERS]
+    j = nbr[:n, NEIGHBOUR_SLOTS]
     back = nbr[j, _REVERSE]                       # j = -1 reads the sentinel row
     keep = back == np.arange(n)[:, None]
-    nbr[:n, _OTHERS] = np.where(keep, j, -1)
+    nbr[:n, NEIGHBOUR_SLOTS] = np.where(keep, j, -1)
 
 
 def window_indices(grid: Grid, window: tuple[int, int]) -> np.ndarray:

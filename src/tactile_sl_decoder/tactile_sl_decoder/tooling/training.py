@@ -2,9 +2,12 @@
 
 Data: stereo frames rendered by :mod:`tactile_sl_camera.sim` under random indenters, depths,
 positions, shear and nuisances (blur, noise, vignetting, uneven light, gamma, exposure,
-shadows). Each image goes through the same :func:`extract_symbols` as at run time; a
-detection within a quarter spacing of a ground-truth cell's projection is labelled with the
-pattern's value at that cell. Other detections are not used. Training then adds patch-level
+shadows), most of them also with the nuisances of real sensors (:func:`sensor_nuisances`:
+an object seen through the pad, MJPEG, defocus, motion blur, unequal exposure, a damaged
+print, dust) at a glyph spacing of 12-24 px. Each image goes through the same
+:func:`extract_symbols` as at run time; a detection within a quarter spacing of an
+undamaged glyph's projection is labelled with the pattern's value at that cell. Other
+detections are not used. Training then adds patch-level
 augmentation (small rotation, scale, shift, contrast, gamma, blur, noise).
 
 Held-out data uses other seeds *and* other indenter kinds than training (training sees
@@ -122,8 +125,21 @@ def artwork_values(art: Any, primitives: tuple[str, ...] | list[str]) -> np.ndar
     return score.argmax(axis=1).astype(np.uint8).reshape(art.rows, art.cols)
 
 
-def random_scene(rng: np.random.Generator, kinds: tuple[str, ...]) -> tuple[list[Any], Any]:
-    """Random contacts (0-2 indenters of the given kinds) and random nuisances."""
+# Glyph spacings in the image (px) the training frames are rendered at: the sensor's 18 px
+# most often, and the 12-24 px of other lenses and distances (docs/robustness.md).
+TRAIN_SPACINGS_PX = (12.0, 14.0, 16.0, 18.0, 18.0, 18.0, 20.0, 24.0)
+SENSOR_NUISANCE_SHARE = 0.6    # frames that also get the nuisances of real sensors
+BASE_FOCAL_PX = (540.0, 538.0)  # RigParams' focal lengths: 18 px glyph spacing at 15 mm
+
+
+def random_scene(rng: np.random.Generator, kinds: tuple[str, ...]
+                 ) -> tuple[list[Any], Any, float]:
+    """Random contacts (0-2 indenters of the given kinds), nuisances and glyph spacing (px).
+
+    Lighting nuisances on every frame (30 % harsh); on ``SENSOR_NUISANCE_SHARE`` of the
+    frames also those of real sensors (:func:`sensor_nuisances`) and a spacing drawn from
+    ``TRAIN_SPACINGS_PX`` (else the sensor's 18 px).
+    """
     from tactile_sl_camera.sim import Contact, Nuisances
 
     contacts = []
@@ -140,7 +156,7 @@ def random_scene(rng: np.random.Generator, kinds: tuple[str, ...]) -> tuple[list
             depth=float(rng.uniform(0.0, 0.001)),
             shear=(float(rng.normal(0, 0.00008)), float(rng.normal(0, 0.00008)))))
     harsh = rng.random() < 0.3
-    nz = Nuisances(
+    lighting = dict(
         blur_sigma=float(rng.uniform(0.3, 1.5 if harsh else 1.0)),
         noise_sigma=float(rng.uniform(0.3, 5.0 if harsh else 2.0)),
         shot_noise=float(rng.uniform(0.0, 0.2 if harsh else 0.05)),
@@ -156,7 +172,52 @@ def random_scene(rng: np.random.Generator, kinds: tuple[str, ...]) -> tuple[list
                   "radius": float(rng.uniform(0.001, 0.003)),
                   "strength": float(rng.uniform(0.2, 0.5)), "softness": 0.0015}]
         if harsh and rng.random() < 0.5 else [])
-    return contacts, nz
+    spacing = 18.0
+    if rng.random() < SENSOR_NUISANCE_SHARE:
+        lighting.update(sensor_nuisances(rng, touching=bool(contacts)))
+        spacing = float(rng.choice(TRAIN_SPACINGS_PX))
+    return contacts, Nuisances.from_dict(lighting), spacing
+
+
+def sensor_nuisances(rng: np.random.Generator, touching: bool) -> dict[str, Any]:
+    """Random nuisances of real sensors (docs/camera.md), each present on some frames.
+
+    Ranges span the robustness sweep's mild to severe levels: an object seen through the
+    pad (dark, striped, noisy, printed), MJPEG, defocus, motion blur, exposure differing
+    between the cameras and from frame to frame, a damaged print (dropout, wear, scratches,
+    bubbles) and dust on the optics.
+    """
+    u = rng.uniform
+    doc: dict[str, Any] = {}
+    if touching and rng.random() < 0.6:
+        kind = str(rng.choice(["dark", "stripes", "noise", "text"]))
+        if kind == "dark":
+            doc.update(see_through=kind, object_albedo=float(u(0.08, 0.4)))
+        else:
+            albedo = float(u(0.5, 0.8))
+            doc.update(see_through=kind, object_albedo=albedo,
+                       object_contrast=float(min(albedo, u(0.15, 0.65))),
+                       object_scale=float(u(2.5e-4, 5e-4)))
+    if rng.random() < 0.5:
+        doc["jpeg_quality"] = int(rng.integers(45, 96))
+    if rng.random() < 0.4:
+        doc["defocus_px"] = float(u(0.5, 2.5))
+    if rng.random() < 0.4:
+        doc.update(motion_blur_px=float(u(1.0, 8.0)), motion_blur_angle_deg=float(u(0.0, 180.0)))
+    if rng.random() < 0.5:
+        doc.update(exposure_right=float(u(0.55, 1.1)), exposure_jitter_camera=float(u(0.0, 0.2)))
+    if rng.random() < 0.3:
+        doc["dropout"] = float(u(0.0, 0.08))
+    if rng.random() < 0.3:
+        doc["wear"] = float(u(0.0, 0.15))
+    if rng.random() < 0.3:
+        doc["scratches"] = int(rng.integers(1, 13))
+    if rng.random() < 0.3:
+        doc["bubbles"] = int(rng.integers(1, 9))
+    if rng.random() < 0.3:
+        doc.update(dust=int(rng.integers(5, 61)), dust_radius_px=float(u(1.5, 3.5)),
+                   dust_strength=float(u(0.4, 0.8)))
+    return doc
 
 
 def render_dataset(frames: int, seed: int, kinds: tuple[str, ...], values: np.ndarray | None,
@@ -164,6 +225,7 @@ def render_dataset(frames: int, seed: int, kinds: tuple[str, ...], values: np.nd
                    progress: Callable[[int, str], None] | None = None) -> PatchSet:
     """Patches labelled from ``frames`` simulated stereo frames (both cameras)."""
     from tactile_sl_camera.sim import Renderer, load_artwork
+    from tactile_sl_camera.sim.optics import RigParams, SimulatedCameraPair
 
     art = load_artwork(artwork)
     if values is None:
@@ -171,14 +233,19 @@ def render_dataset(frames: int, seed: int, kinds: tuple[str, ...], values: np.nd
     if (art.rows, art.cols) != tuple(values.shape):
         raise ValueError(f"artwork has {art.rows}x{art.cols} cells but the pattern "
                          f"{values.shape[0]}x{values.shape[1]}: labels would be wrong")
-    renderer = Renderer(art)
+    renderers: dict[float, Any] = {}
     rng = np.random.default_rng(seed)
     sets = []
     for i in range(frames):
-        contacts, nz = random_scene(rng, kinds)
-        frame = renderer.render(contacts, nz, seed=seed * 1000 + i)
+        contacts, nz, spacing = random_scene(rng, kinds)
+        if spacing not in renderers:
+            scale = spacing / 18.0
+            rig = RigParams(focal=(BASE_FOCAL_PX[0] * scale, BASE_FOCAL_PX[1] * scale))
+            renderers[spacing] = Renderer(art, SimulatedCameraPair(rig))
+        frame = renderers[spacing].render(contacts, nz, seed=seed * 1000 + i, frame_index=i)
         truth = frame.truth
-        vis = truth.visible
+        # damaged glyphs (worn, scratched, under a bubble or dust) carry no reliable class
+        vis = truth.visible if truth.damaged is None else truth.visible & ~truth.damaged
         true_values = values[truth.rows[vis], truth.cols[vis]]
         for image, px in ((frame.left, truth.px_left), (frame.right, truth.px_right)):
             det = extract_symbols(image, params)

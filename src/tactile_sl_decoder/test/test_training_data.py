@@ -1,0 +1,72 @@
+"""Training data of the glyph classifier: scenes with real-sensor nuisances, damaged glyphs."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tactile_sl_decoder.tooling import training
+
+
+def test_sensor_nuisances_are_valid_and_cover_every_kind():
+    from tactile_sl_camera.sim import Nuisances
+
+    rng = np.random.default_rng(3)
+    seen: set[str] = set()
+    for _ in range(300):
+        doc = training.sensor_nuisances(rng, touching=True)
+        Nuisances.from_dict(doc)                  # in range (ValueError otherwise)
+        seen |= set(doc)
+        if "jpeg_quality" in doc:
+            assert 45 <= doc["jpeg_quality"] <= 95
+        if "see_through" in doc and doc["see_through"] != "dark":
+            assert doc["object_contrast"] <= doc["object_albedo"]
+    assert {"see_through", "jpeg_quality", "defocus_px", "motion_blur_px", "exposure_right",
+            "dropout", "wear", "scratches", "bubbles", "dust"} <= seen
+    # no object is seen through the pad where nothing touches it
+    assert not any("see_through" in training.sensor_nuisances(rng, touching=False)
+                   for _ in range(100))
+
+
+def test_random_scenes_vary_the_glyph_spacing():
+    rng = np.random.default_rng(4)
+    spacings = [training.random_scene(rng, training.TRAIN_KINDS)[2] for _ in range(200)]
+    assert set(spacings) <= set(training.TRAIN_SPACINGS_PX)
+    assert min(spacings) == 12.0 and max(spacings) == 24.0
+    assert 0.4 < np.mean(np.asarray(spacings) == 18.0) < 0.8    # the sensor's own most often
+
+
+def test_damaged_glyphs_are_left_out_of_the_training_patches(monkeypatch):
+    """A frame with 40 % of the glyphs partly worn: only undamaged glyphs give patches."""
+    from tactile_sl_camera.sim import Nuisances, Renderer, load_artwork
+
+    nz = Nuisances.from_dict({"wear": 0.4})
+    monkeypatch.setattr(training, "random_scene", lambda rng, kinds: ([], nz, 18.0))
+    data = training.render_dataset(1, 11, training.TRAIN_KINDS, None)
+    art = load_artwork()
+    truth = Renderer(art).render([], nz, seed=11 * 1000, frame_index=0).truth
+    undamaged = int((truth.visible & ~truth.damaged).sum())
+    assert truth.damaged[truth.visible].mean() > 0.2
+    # both images; a few undamaged glyphs may be missed, no damaged one may come in
+    assert 2 * undamaged * 0.95 <= len(data) <= 2 * undamaged
+    values = training.artwork_values(art, training.DEFAULT_PRIMITIVES)
+    assert set(np.unique(data.labels)) <= set(np.unique(values))
+
+
+@pytest.mark.parametrize("spacing", [12.0])
+def test_frames_render_at_the_drawn_spacing(monkeypatch, spacing):
+    from tactile_sl_camera.sim import Nuisances
+
+    monkeypatch.setattr(training, "random_scene",
+                        lambda rng, kinds: ([], Nuisances(), spacing))
+    captured = []
+    real = training.extract_symbols
+
+    def spy(image, params=None):
+        det = real(image, params)
+        captured.append(det.spacing_px)
+        return det
+
+    monkeypatch.setattr(training, "extract_symbols", spy)
+    training.render_dataset(1, 2, training.TRAIN_KINDS, None)
+    assert len(captured) == 2
+    assert all(abs(s - spacing) < 0.12 * spacing for s in captured)
