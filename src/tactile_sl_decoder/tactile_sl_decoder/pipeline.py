@@ -34,6 +34,7 @@ from tactile_sl_decoder.decode.track import carried_cells
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
 from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig, match_and_triangulate
+from tactile_sl_decoder.stereo.transfer import TransferParams, transfer_cells
 
 
 @dataclass
@@ -45,6 +46,7 @@ class PipelineParams:
     stereo: StereoParams = field(default_factory=StereoParams)
     outliers: OutlierParams = field(default_factory=OutlierParams)
     carry: CarryParams = field(default_factory=CarryParams)   # labels from the last frame
+    transfer: TransferParams = field(default_factory=TransferParams)  # cells across the pair
     extraction: Any = None          # tactile_sl_decoder.extract.extraction.ExtractionParams
     threads: int = 2                # >1: extract + classify left and right concurrently
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
@@ -114,6 +116,7 @@ class StereoPipeline:
         self._rig_key: tuple | None = None
         # one per camera, sharing params.carry (live changes apply to both)
         self.params.carry.validate()
+        self.params.transfer.validate()
         self._carry = (LabelCarry(self.params.carry), LabelCarry(self.params.carry))
         self._prev_cells: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
         self._full_decode_in = 0     # frames until the window search runs regardless
@@ -346,16 +349,30 @@ class StereoPipeline:
 
     def triangulate(self, left: Glyphs, right: Glyphs, rig: StereoRig
                     ) -> tuple[np.ndarray, int]:
-        """Contract points from two decoded images, and the count of rejected pairs."""
+        """Contract points from two decoded images, and the count of rejected pairs.
+
+        First a glyph one image could not decode takes the cell the other image decoded
+        where the pair's geometry puts it (:func:`~.stereo.transfer.transfer_cells`); the
+        images' ``row`` / ``col`` are then new arrays (the decoder's own cells, carried to
+        the next frame, stay as decoded).
+        """
         ncols = self.codebook.cols
-        cl = np.where(left.row >= 0, left.row.astype(np.int64) * ncols + left.col, -1)
-        cr = np.where(right.row >= 0, right.row.astype(np.int64) * ncols + right.col, -1)
         uv_l = np.column_stack([left.u, left.v]).astype(np.float64)
         uv_r = np.column_stack([right.u, right.v]).astype(np.float64)
         rect_l, rect_r = left.rectified, right.rectified
         if rect_l is None or rect_r is None or len(rect_l) != len(uv_l) or len(rect_r) != len(
                 uv_r):
             rect_l = rect_r = None                       # rectify the matched ones only
+        if self.params.transfer.enabled and len(uv_l) and len(uv_r):
+            if rect_l is None or rect_r is None:
+                rect_l = StereoRig.rectify(rig.left, uv_l)
+                rect_r = StereoRig.rectify(rig.right, uv_r)
+            for g in (left, right):
+                g.row, g.col = g.row.copy(), g.col.copy()
+            transfer_cells(left, right, rect_l, rect_r, self.pattern.array,
+                           self.params.transfer)
+        cl = np.where(left.row >= 0, left.row.astype(np.int64) * ncols + left.col, -1)
+        cr = np.where(right.row >= 0, right.row.astype(np.int64) * ncols + right.col, -1)
         m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, self.params.stereo,
                                   rect_l, rect_r)
         # Points off the smooth surface their lattice neighbours define are dropped: a glyph

@@ -128,6 +128,7 @@ class DecoderNode(Node):
             apply=lambda v: setattr(params.stereo, "max_reprojection_px", float(v))))
         self._declare_outliers(decl, params)
         self._declare_carry(decl, params)
+        self._declare_transfer(decl, params)
         self.warn_period = float(decl("warn_period", 5.0,
             "Seconds between two warnings of the same kind (throttling).", (0.0, 3600.0),
             apply=lambda v: setattr(self, "warn_period", float(v))))
@@ -251,6 +252,21 @@ class DecoderNode(Node):
             ("cells", "cells too: when this frame's lattice and labels confirm the cell of "
              "every glyph matched to the previous frame, the window search is skipped.",
              None)])
+
+    def _declare_transfer(self, decl: Any, params: PipelineParams) -> None:
+        """Live ``transfer.<field>`` parameters: cells carried across the stereo pair."""
+        self._declare_group(decl, "transfer", params.transfer, "Cells across the stereo pair "
+                            "(docs/robustness.md, 'Cells across the stereo pair'): ", [
+            ("enabled", "a glyph one image could not decode takes the cell the other image "
+             "decoded where the pair's geometry and the neighbouring cells put it.", None),
+            ("radius", "largest distance of that glyph from the predicted place (and spread "
+             "of the neighbours' predictions), in glyph spacings.", (0.01, 0.45)),
+            ("clearance", "no other glyph may lie this close to it, in glyph spacings.",
+             (0.1, 1.0)),
+            ("min_neighbours", "neighbouring cells decoded in both images needed to predict "
+             "the place.", (1, 8)),
+            ("passes", "growth passes (each adds cells next to the last ones; 0 = off).",
+             (0, 64))])
 
     def _declare_group(self, decl: Any, prefix: str, target: Any, what: str,
                        spec: list[tuple[str, str, tuple | None]]) -> None:
