@@ -86,6 +86,8 @@ def transfer_cells(left: Glyphs, right: Glyphs, rect_left: np.ndarray, rect_righ
     p = params or TransferParams()
     if not p.enabled or p.passes <= 0 or len(left) == 0 or len(right) == 0:
         return 0
+    if not ((left.row == CELL_UNKNOWN).any() or (right.row == CELL_UNKNOWN).any()):
+        return 0                              # the usual frame: every glyph has its cell
     known = [g.spacing_px for g in (left, right) if g.spacing_px > 0]
     spacing = float(sum(known) / len(known)) if known else 0.0
     if spacing <= 0:
@@ -137,7 +139,7 @@ def _median_rows(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
 def _one_way(src: _Side, dst: _Side, symbols: np.ndarray, spacing: float,
              p: TransferParams) -> int:
     """One pass of cells decoded in ``src`` given to glyphs of ``dst``; returns the count."""
-    if dst.undecoded == 0:                                        # the usual frame
+    if dst.undecoded == 0:
         return 0
     ts, td = src.table, dst.table
     missing = np.argwhere((ts >= 0) & (td < 0))                  # (M, 2) cells to look for
