@@ -34,7 +34,7 @@ from tactile_sl_decoder.decode.track import carried_cells
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
 from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig, match_and_triangulate
-from tactile_sl_decoder.stereo.transfer import TransferParams, transfer_cells
+from tactile_sl_decoder.stereo.transfer import TransferParams, needs_transfer, transfer_cells
 
 
 @dataclass
@@ -363,7 +363,8 @@ class StereoPipeline:
         if rect_l is None or rect_r is None or len(rect_l) != len(uv_l) or len(rect_r) != len(
                 uv_r):
             rect_l = rect_r = None                       # rectify the matched ones only
-        if self.params.transfer.enabled and len(uv_l) and len(uv_r):
+        if self.params.transfer.enabled and len(uv_l) and len(uv_r) and needs_transfer(
+                left, right):
             if rect_l is None or rect_r is None:
                 rect_l = StereoRig.rectify(rig.left, uv_l)
                 rect_r = StereoRig.rectify(rig.right, uv_r)

@@ -86,8 +86,8 @@ def transfer_cells(left: Glyphs, right: Glyphs, rect_left: np.ndarray, rect_righ
     p = params or TransferParams()
     if not p.enabled or p.passes <= 0 or len(left) == 0 or len(right) == 0:
         return 0
-    if not ((left.row == CELL_UNKNOWN).any() or (right.row == CELL_UNKNOWN).any()):
-        return 0                              # the usual frame: every glyph has its cell
+    if not needs_transfer(left, right):
+        return 0
     known = [g.spacing_px for g in (left, right) if g.spacing_px > 0]
     spacing = float(sum(known) / len(known)) if known else 0.0
     if spacing <= 0:
@@ -103,6 +103,11 @@ def transfer_cells(left: Glyphs, right: Glyphs, rect_left: np.ndarray, rect_righ
     return done
 
 
+def needs_transfer(left: Glyphs, right: Glyphs) -> bool:
+    """Whether a glyph of either image lacks a cell (the usual frame: none does)."""
+    return bool((left.row == CELL_UNKNOWN).any() or (right.row == CELL_UNKNOWN).any())
+
+
 class _Side:
     """One image's glyphs with its cell table and (built when first needed) k-d tree."""
 
@@ -114,7 +119,6 @@ class _Side:
         ok = np.flatnonzero((g.row != CELL_UNKNOWN) & (g.row < shape[0]) & (g.col < shape[1]))
         self.table[g.row[ok], g.col[ok]] = ok
         self._tree: cKDTree | None = None
-        self.low, self.high = self.rect.min(axis=0), self.rect.max(axis=0)
         self.undecoded = int((g.row == CELL_UNKNOWN).sum())    # glyphs a cell could go to
 
     @property
@@ -161,13 +165,6 @@ def _one_way(src: _Side, dst: _Side, symbols: np.ndarray, spacing: float,
     shift = _median_rows(near, have)                             # (M', 2)
     spread = np.where(have, np.linalg.norm(near - shift[:, None, :], axis=2), 0.0).max(axis=1)
     predicted = src.rect[ts[missing[:, 0], missing[:, 1]]] + shift
-    # cells the other camera does not see (beyond its glyphs' extent) need no search
-    inside = ((predicted >= dst.low - p.radius * spacing)
-              & (predicted <= dst.high + p.radius * spacing)).all(axis=1)
-    if not inside.any():
-        return 0
-    missing, predicted = missing[inside], predicted[inside]
-    spread = spread[inside]
     dist, idx = dst.tree.query(predicted, k=2)
     first, chosen, second = dist[:, 0], idx[:, 0], dist[:, 1]
     g = dst.glyphs
