@@ -39,7 +39,6 @@ import numpy as np
 REPO = pathlib.Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "robustness.md"
 BEGIN, END = "<!-- sweep:begin -->", "<!-- sweep:end -->"
-BASE_FOCAL = (540.0, 538.0)   # RigParams default: 18 px glyph spacing at 15 mm
 OBJECTS = ("dark", "stripes", "noise", "text")
 
 # nuisance -> (mild, realistic, severe) scene nuisances; "rig_spacing" scales the focal
@@ -179,8 +178,7 @@ class Sweep:
         from tactile_sl_camera.sim.render import Renderer
 
         if spacing not in self._renderers:
-            f = spacing / 18.0
-            rig = RigParams(focal=(BASE_FOCAL[0] * f, BASE_FOCAL[1] * f))
+            rig = RigParams.for_glyph_spacing(spacing)
             self._renderers[spacing] = Renderer(self.artwork, SimulatedCameraPair(rig))
         return self._renderers[spacing]
 

@@ -81,6 +81,18 @@ class RigParams:
         (float(np.radians(-0.1)), 0.0, float(np.radians(-0.12))))
     extra: dict[str, Any] = field(default_factory=dict)
 
+    GLYPH_SPACING_PX = 18.0   # the default rig's glyph spacing at the pad (0.5 mm at 15 mm)
+
+    @classmethod
+    def for_glyph_spacing(cls, spacing_px: float) -> "RigParams":
+        """The default rig with both focal lengths scaled to this glyph spacing in pixels.
+
+        Stands for other lenses or distances (12-24 px in docs/robustness.md).
+        """
+        scale = float(spacing_px) / cls.GLYPH_SPACING_PX
+        fx_left, fx_right = cls.focal
+        return cls(focal=(fx_left * scale, fx_right * scale))
+
     @classmethod
     def from_dict(cls, doc: dict[str, Any] | None) -> "RigParams":
         """Rig from a YAML mapping (unknown keys rejected so typos do not pass silently)."""

@@ -129,7 +129,6 @@ def artwork_values(art: Any, primitives: tuple[str, ...] | list[str]) -> np.ndar
 # most often, and the 12-24 px of other lenses and distances (docs/robustness.md).
 TRAIN_SPACINGS_PX = (12.0, 14.0, 16.0, 18.0, 18.0, 18.0, 20.0, 24.0)
 SENSOR_NUISANCE_SHARE = 0.6    # frames that also get the nuisances of real sensors
-BASE_FOCAL_PX = (540.0, 538.0)  # RigParams' focal lengths: 18 px glyph spacing at 15 mm
 
 
 def random_scene(rng: np.random.Generator, kinds: tuple[str, ...]
@@ -239,9 +238,8 @@ def render_dataset(frames: int, seed: int, kinds: tuple[str, ...], values: np.nd
     for i in range(frames):
         contacts, nz, spacing = random_scene(rng, kinds)
         if spacing not in renderers:
-            scale = spacing / 18.0
-            rig = RigParams(focal=(BASE_FOCAL_PX[0] * scale, BASE_FOCAL_PX[1] * scale))
-            renderers[spacing] = Renderer(art, SimulatedCameraPair(rig))
+            renderers[spacing] = Renderer(
+                art, SimulatedCameraPair(RigParams.for_glyph_spacing(spacing)))
         frame = renderers[spacing].render(contacts, nz, seed=seed * 1000 + i, frame_index=i)
         truth = frame.truth
         # damaged glyphs (worn, scratched, under a bubble or dust) carry no reliable class
