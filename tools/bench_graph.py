@@ -72,6 +72,9 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
                         help="take the 'start' CPU / memory sample this many seconds after the "
                         "first cloud (memory growth without start-up: allocator pools, the "
                         "touch reference)")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="extra decoder parameter (repeatable), e.g. "
+                             "pipeline.threads:=1")
     parser.add_argument("--domain-id", type=int, default=int(os.environ.get("BENCH_DOMAIN_ID", 29)))
     parser.add_argument("--logs", type=pathlib.Path, default=REPO / "out" / "bench_graph")
     args = parser.parse_args()
@@ -111,6 +114,8 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
         for ns in spaces:
             tag = ns.strip("/").replace("/", "_")
             decoder_args = ["-r", f"__ns:={ns}", "-p", "publish_symbols:=false"]
+            for item in args.param:
+                decoder_args += ["-p", item]
             if args.chain:
                 decoder_args += ["-p", "input:=symbols",
                                  "-r", "left/symbols:=left/labelled_symbols",
