@@ -33,6 +33,7 @@ from tactile_sl_decoder.decode.grid import GridParams, build_grid, nearest_neigh
 from tactile_sl_decoder.decode.track import carried_cells
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
+from tactile_sl_decoder.stereo.rescue import Rescued, RescueParams, rescue_pair
 from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig, match_and_triangulate
 from tactile_sl_decoder.stereo.transfer import TransferParams, needs_transfer, transfer_cells
 
@@ -47,6 +48,7 @@ class PipelineParams:
     outliers: OutlierParams = field(default_factory=OutlierParams)
     carry: CarryParams = field(default_factory=CarryParams)   # labels from the last frame
     transfer: TransferParams = field(default_factory=TransferParams)  # cells across the pair
+    rescue: RescueParams = field(default_factory=RescueParams)  # undetected glyphs, images path
     extraction: Any = None          # tactile_sl_decoder.extract.extraction.ExtractionParams
     threads: int = 2                # >1: extract + classify left and right concurrently
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
@@ -117,6 +119,7 @@ class StereoPipeline:
         # one per camera, sharing params.carry (live changes apply to both)
         self.params.carry.validate()
         self.params.transfer.validate()
+        self.params.rescue.validate()
         self._carry = (LabelCarry(self.params.carry), LabelCarry(self.params.carry))
         self._prev_cells: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
         self._full_decode_in = 0     # frames until the window search runs regardless
@@ -347,14 +350,18 @@ class StereoPipeline:
             self._rig_key = key
         return self._rig
 
-    def triangulate(self, left: Glyphs, right: Glyphs, rig: StereoRig
+    def triangulate(self, left: Glyphs, right: Glyphs, rig: StereoRig,
+                    images: tuple[np.ndarray, np.ndarray] | None = None
                     ) -> tuple[np.ndarray, int]:
         """Contract points from two decoded images, and the count of rejected pairs.
 
         First a glyph one image could not decode takes the cell the other image decoded
         where the pair's geometry puts it (:func:`~.stereo.transfer.transfer_cells`); the
         images' ``row`` / ``col`` are then new arrays (the decoder's own cells, carried to
-        the next frame, stay as decoded).
+        the next frame, stay as decoded).  With the grey ``images``, a cell one image
+        decoded and the other holds no glyph for is then measured in that image where the
+        other puts it (:func:`~.stereo.rescue.rescue_pair`; the glyph arrays stay as
+        extracted).
         """
         ncols = self.codebook.cols
         uv_l = np.column_stack([left.u, left.v]).astype(np.float64)
@@ -374,6 +381,14 @@ class StereoPipeline:
                            self.params.transfer)
         cl = np.where(left.row >= 0, left.row.astype(np.int64) * ncols + left.col, -1)
         cr = np.where(right.row >= 0, right.row.astype(np.int64) * ncols + right.col, -1)
+        if images is not None and self.params.rescue.enabled and len(uv_l) and len(uv_r):
+            extraction = self.params.extraction or _default_extraction()
+            predict = self._classifier().predict
+            found = rescue_pair(left, right, images, self.pattern.array, extraction, predict,
+                                self.params.rescue)
+            if len(found[0].cell) or len(found[1].cell):
+                uv_l, cl, rect_l = _with_rescued(uv_l, cl, rect_l, found[0], rig.left)
+                uv_r, cr, rect_r = _with_rescued(uv_r, cr, rect_r, found[1], rig.right)
         m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, self.params.stereo,
                                   rect_l, rect_r)
         # Points off the smooth surface their lattice neighbours define are dropped: a glyph
@@ -419,7 +434,7 @@ class StereoPipeline:
         if label_hook is not None:
             label_hook(left, right)
         t3 = time.perf_counter()
-        result = self._finish(left, right, rig, track=True)
+        result = self._finish(left, right, rig, track=True, images=(left_gray, right_gray))
         result.carried = carried
         if self._pool is None:
             result.timings_ms.update(check=1e3 * (t1 - t0), extract=1e3 * (t2 - t1),
@@ -461,7 +476,8 @@ class StereoPipeline:
         return result
 
     def _finish(self, left: Glyphs, right: Glyphs, rig: StereoRig,
-                track: bool = False) -> StereoResult:
+                track: bool = False,
+                images: tuple[np.ndarray, np.ndarray] | None = None) -> StereoResult:
         """Decode, pair and triangulate.
 
         ``track``: the frames of a camera stream (images path), whose cells may be carried
@@ -477,7 +493,7 @@ class StereoPipeline:
         else:
             self.decode_pair(left, right)
         t1 = time.perf_counter()
-        points, rejected = self.triangulate(left, right, rig)
+        points, rejected = self.triangulate(left, right, rig, images)
         t2 = time.perf_counter()
         result = StereoResult(points, left, right,
                               {"decode": 1e3 * (t1 - t0), "stereo": 1e3 * (t2 - t1)},
@@ -490,6 +506,22 @@ class StereoPipeline:
         if self._pool is not None:
             self._pool.shutdown(wait=False)
             self._pool = None
+
+
+def _default_extraction() -> Any:
+    from tactile_sl_decoder.extract.extraction import ExtractionParams
+
+    return ExtractionParams()
+
+
+def _with_rescued(uv: np.ndarray, cell: np.ndarray, rect: np.ndarray | None, found: Rescued,
+                  cam: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """One image's centres, cells and rectified centres with its rescued glyphs appended."""
+    if len(found.cell) == 0:
+        return uv, cell, rect
+    if rect is not None:
+        rect = np.concatenate([rect, StereoRig.rectify(cam, found.uv)])
+    return np.concatenate([uv, found.uv]), np.concatenate([cell, found.cell]), rect
 
 
 def _info_key(info: Any) -> tuple:

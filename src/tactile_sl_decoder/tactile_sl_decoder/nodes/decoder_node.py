@@ -129,6 +129,7 @@ class DecoderNode(Node):
         self._declare_outliers(decl, params)
         self._declare_carry(decl, params)
         self._declare_transfer(decl, params)
+        self._declare_rescue(decl, params)
         self.warn_period = float(decl("warn_period", 5.0,
             "Seconds between two warnings of the same kind (throttling).", (0.0, 3600.0),
             apply=lambda v: setattr(self, "warn_period", float(v))))
@@ -267,6 +268,26 @@ class DecoderNode(Node):
              "the place.", (1, 8)),
             ("passes", "growth passes (each adds cells next to the last ones; 0 = off).",
              (0, 64))])
+
+    def _declare_rescue(self, decl: Any, params: PipelineParams) -> None:
+        """Live ``rescue.<field>`` parameters: glyphs one image did not detect."""
+        self._declare_group(decl, "rescue", params.rescue, "Glyphs one camera did not "
+                            "detect (input=images; docs/robustness.md, 'Glyphs one camera "
+                            "did not detect'): ", [
+            ("enabled", "a cell the other image decoded where this image found no glyph is "
+             "measured in this image where the neighbouring cells put it.", None),
+            ("radius", "largest move of the measured centre from that place (and spread of "
+             "the neighbours' predictions), in glyph spacings.", (0.01, 0.45)),
+            ("clearance", "no detected glyph may lie this close to the place, in glyph "
+             "spacings.", (0.1, 1.0)),
+            ("min_neighbours", "neighbouring cells decoded in both images needed to predict "
+             "the place.", (1, 8)),
+            ("min_contrast", "ink contrast needed there, as a fraction of the median "
+             "contrast of the detected glyphs.", (0.0, 2.0)),
+            ("centroid_passes", "grey-centroid passes, each re-sampling the patch around "
+             "the last centre.", (1, 10)),
+            ("grow_passes", "growth passes (each measures cells next to the last ones; "
+             "0 = off).", (0, 64))])
 
     def _declare_group(self, decl: Any, prefix: str, target: Any, what: str,
                        spec: list[tuple[str, str, tuple | None]]) -> None:
