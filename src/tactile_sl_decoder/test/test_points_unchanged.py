@@ -7,7 +7,10 @@ layout change (issue 9; recorded with ``python tools/points_digest.py --write ..
 (issue 11: the points of robust_damaged_print and robust_textured_object moved, the other ten
 bags' stayed byte-identical), and when the classifier was retrained with the real-sensor
 nuisances (issue 11, 2026-12-02: robust_damaged_print lost the point of cell (2, 14) in two
-frames; the other eleven bags' points stayed byte-identical).  A change that alters any
+frames; the other eleven bags' points stayed byte-identical), and when glyphs one camera
+did not detect were first measured where the other camera's cells put them (issue 11,
+stereo/rescue.py: edge and harsh_lighting each gained the one point they lacked, cell by
+cell checked against the ground truth; every other frame byte-identical).  A change that alters any
 decoded point, even in the last bit, fails here; when a change is *meant* to alter points
 (a better decoder), record the digests again and say so in the commit.
 

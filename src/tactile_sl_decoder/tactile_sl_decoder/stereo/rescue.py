@@ -110,26 +110,29 @@ def rescue_pair(left: Glyphs, right: Glyphs, images: tuple[np.ndarray, np.ndarra
     if not p.enabled or len(left) == 0 or len(right) == 0:
         return Rescued.none(), Rescued.none()
     tl, tr = _cell_table(left, symbols.shape), _cell_table(right, symbols.shape)
-    return (_one_way(right, tr, left, tl, images[0], symbols, extraction, classify, p),
-            _one_way(left, tl, right, tr, images[1], symbols, extraction, classify, p))
+    uvl = np.column_stack([left.u, left.v]).astype(np.float64)
+    uvr = np.column_stack([right.u, right.v]).astype(np.float64)
+    return (_one_way(uvr, tr, left, uvl, tl, images[0], symbols, extraction, classify, p),
+            _one_way(uvl, tl, right, uvr, tr, images[1], symbols, extraction, classify, p))
 
 
-def _one_way(src: Glyphs, ts: np.ndarray, dst: Glyphs, td: np.ndarray, dst_gray: np.ndarray,
-             symbols: np.ndarray, extraction: Any,
+def _one_way(uv_s: np.ndarray, ts: np.ndarray, dst: Glyphs, uv_d: np.ndarray, td: np.ndarray,
+             dst_gray: np.ndarray, symbols: np.ndarray, extraction: Any,
              classify: Callable[[np.ndarray], tuple[np.ndarray, Any]],
              p: RescueParams) -> Rescued:
-    """Cells decoded in ``src`` that no glyph of ``dst`` holds, measured in ``dst_gray``.
+    """Cells the source image decoded that no glyph of ``dst`` holds, measured in its image.
+
+    ``uv_s`` / ``uv_d``: glyph centres, ``ts`` / ``td``: padded cell tables of the source
+    and ``dst`` images.
 
     Grown pass by pass: a cell measured in one pass is a neighbour in the next, so a region
     the target camera found nothing in is filled from its rim inwards.
     """
-    if len(dst) < 2 or dst.spacing_px <= 0 or not ((ts >= 0) & (td < 0)).any():
+    if len(dst) < 2 or dst.spacing_px <= 0:
         return Rescued.none()
     spacing = float(dst.spacing_px)
-    uv_s = np.column_stack([src.u, src.v]).astype(np.float64)
-    uv_d = np.column_stack([dst.u, dst.v]).astype(np.float64)
     detected = len(uv_d)
-    table = td.copy()
+    table = td
     tree: cKDTree | None = None
     typical: float | None = None
     found = Rescued.none()
@@ -151,7 +154,9 @@ def _one_way(src: Glyphs, ts: np.ndarray, dst: Glyphs, td: np.ndarray, dst_gray:
         if not ok.any():
             break
         rows, cols = missing[ok, 0], missing[ok, 1]
-        table[rows, cols] = len(uv_d) + np.arange(len(rows))
+        if table is td:
+            table = td.copy()
+        table[rows + 1, cols + 1] = len(uv_d) + np.arange(len(rows))
         uv_d = np.concatenate([uv_d, uv[ok]])
         found = Rescued(np.concatenate([found.uv, uv[ok]]),
                         np.concatenate([found.cell,
@@ -163,34 +168,37 @@ def _one_way(src: Glyphs, ts: np.ndarray, dst: Glyphs, td: np.ndarray, dst_gray:
 def _predict(uv_s: np.ndarray, ts: np.ndarray, uv_d: np.ndarray, td: np.ndarray,
              image_shape: tuple[int, ...], spacing: float, p: RescueParams
              ) -> tuple[np.ndarray, np.ndarray]:
-    """Missing cells ((M, 2) row, col) with enough agreeing neighbours, and their places."""
+    """Missing cells ((M, 2) row, col) with enough agreeing neighbours, and their places.
+
+    ``ts`` / ``td``: padded cell tables (:func:`_cell_table`), so that every cell of the
+    pattern has 8 neighbour entries (-1 off the pattern).
+    """
     none = np.zeros((0, 2), np.int64), np.zeros((0, 2))
-    shape = ts.shape
-    missing = np.argwhere((ts >= 0) & (td < 0))
+    missing = np.argwhere((ts >= 0) & (td < 0))                 # padded (row, col)
     if len(missing) == 0:
         return none
-    # each missing cell's 8 neighbours: glyph indices in both images (-1: none / off the grid)
     rr = missing[:, 0:1] + _NEIGHBOUR_STEPS[None, :, 0]
     cc = missing[:, 1:2] + _NEIGHBOUR_STEPS[None, :, 1]
-    inside = (rr >= 0) & (rr < shape[0]) & (cc >= 0) & (cc < shape[1])
-    rr, cc = np.where(inside, rr, 0), np.where(inside, cc, 0)
     ns, nd = ts[rr, cc], td[rr, cc]
-    have = inside & (ns >= 0) & (nd >= 0)
+    have = (ns >= 0) & (nd >= 0)
     keep = have.sum(axis=1) >= int(p.min_neighbours)
     if not keep.any():
         return none
     missing, ns, nd, have = missing[keep], ns[keep], nd[keep], have[keep]
     near = uv_d[nd] - uv_s[ns]                                   # (M, 8, 2), valid where have
     shift = _median_rows(near, have)                             # (M, 2)
-    spread = np.where(have, np.hypot(*(near - shift[:, None, :]).transpose(2, 0, 1)),
-                      0.0).max(axis=1)
     predicted = uv_s[ts[missing[:, 0], missing[:, 1]]] + shift
     h, w = image_shape[:2]
     margin = 0.6 * spacing     # a glyph closer to the border is cut (extraction drops it)
-    keep = ((spread <= p.radius * spacing)
-            & (predicted[:, 0] >= margin) & (predicted[:, 0] <= w - 1 - margin)
-            & (predicted[:, 1] >= margin) & (predicted[:, 1] <= h - 1 - margin))
-    return missing[keep], predicted[keep]
+    keep = ((predicted >= margin) & (predicted <= (w - 1 - margin, h - 1 - margin))).all(
+        axis=1)
+    if not keep.any():
+        return none
+    near, have, shift = near[keep], have[keep], shift[keep]
+    spread = np.where(have, np.hypot(*(near - shift[:, None, :]).transpose(2, 0, 1)),
+                      0.0).max(axis=1)
+    keep = np.flatnonzero(keep)[spread <= p.radius * spacing]
+    return missing[keep] - 1, predicted[keep]
 
 
 def _typical_contrast(dst: Glyphs, gray: np.ndarray, extraction: Any, spacing: float) -> float:
@@ -263,8 +271,11 @@ def _masks(size: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _cell_table(g: Glyphs, shape: tuple[int, int]) -> np.ndarray:
-    """(rows, cols) index of the glyph holding each cell, -1 none."""
-    table = np.full(shape, -1, np.int64)
-    ok = np.flatnonzero((g.row != CELL_UNKNOWN) & (g.row < shape[0]) & (g.col < shape[1]))
-    table[g.row[ok], g.col[ok]] = ok
+    """(rows + 2, cols + 2) index of the glyph holding each cell, -1 none.
+
+    One cell of padding all round, so that every cell's 8 neighbours can be looked up.
+    """
+    table = np.full((shape[0] + 2, shape[1] + 2), -1, np.int64)
+    has = np.flatnonzero(g.row != CELL_UNKNOWN)
+    table[g.row[has] + 1, g.col[has] + 1] = has
     return table

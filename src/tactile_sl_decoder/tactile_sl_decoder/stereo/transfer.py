@@ -135,9 +135,8 @@ def _median_rows(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """
     x = np.sort(np.where(valid[:, :, None], values, np.inf), axis=1)
     count = valid.sum(axis=1)
-    lo = ((count - 1) // 2)[:, None, None]
-    hi = (count // 2)[:, None, None]
-    return 0.5 * (np.take_along_axis(x, lo, axis=1) + np.take_along_axis(x, hi, axis=1))[:, 0]
+    row = np.arange(len(x))
+    return 0.5 * (x[row, (count - 1) // 2] + x[row, count // 2])
 
 
 def _one_way(src: _Side, dst: _Side, symbols: np.ndarray, spacing: float,
