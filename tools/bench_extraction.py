@@ -28,6 +28,7 @@ import torch  # noqa: E402
 
 from tactile_sl_decoder.classify.classifier import Classifier  # noqa: E402
 from tactile_sl_decoder.extract import extraction as ex  # noqa: E402
+from tactile_sl_decoder.extract.centroid import patch_centroid_offset  # noqa: E402
 from tactile_sl_decoder.extract.extraction import extract_symbols  # noqa: E402
 from tactile_sl_decoder.tooling.synth_glyphs import synth_image  # noqa: E402
 
@@ -78,7 +79,7 @@ def stage_rows(gray: np.ndarray, repeat: int) -> list[str]:
                                                search_px=2.4 * np.sqrt(area)),
         "patch resampling": lambda: ex.sample_patches(gray, det.u, det.v, step,
                                                       params.patch_size),
-        "centre refinement": lambda: ex.patch_centroid_offset(patches, params.dark_glyphs),
+        "centre refinement": lambda: patch_centroid_offset(patches, params.dark_glyphs),
     }
     return [f"    {name:22s} cpu median {np.median(timed(fn, repeat)[1]):6.3f} ms"
             for name, fn in stages.items()]

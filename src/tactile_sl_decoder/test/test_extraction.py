@@ -293,3 +293,40 @@ def test_the_extractor_config_lists_every_extraction_parameter_with_its_default(
     for f in dataclasses.fields(ExtractionParams):
         assert f.name in values, f.name
         assert values[f.name] == f.default, (f.name, values[f.name], f.default)
+
+
+def _dark_object(seed: int, spacing: float = 18.0):
+    """Glyphs with a dark object seen through the pad between them (a disc of 5.3 spacings,
+    albedo 70 against the paper's 190, the ink 20): its rim crosses glyph patches."""
+    rng = np.random.default_rng(seed)
+    centres, cover = _glyph_grid(rng, spacing, (3.0, 2.0))
+    yy, xx = np.mgrid[0:480, 0:640].astype(np.float32)
+    radius = 5.3 * spacing
+    albedo = np.where(np.hypot(xx - 320, yy - 240) < radius, 70.0, 190.0).astype(np.float32)
+    img = cv2.GaussianBlur(albedo, (0, 0), 0.7) * (1 - cover) + 20.0 * cover
+    img = cv2.GaussianBlur(img, (0, 0), 1.2) + rng.normal(0, 1.0, img.shape)
+    rim = np.abs(np.hypot(centres[:, 0] - 320, centres[:, 1] - 240) - radius)
+    return np.clip(img, 0, 255).astype(np.uint8), centres, rim
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_centroid_at_a_dark_objects_rim_follows_the_background(seed):
+    gray, centres, rim = _dark_object(seed)
+    spacing = 18.0
+    err = {}
+    for follow in (False, True):
+        det = extract_symbols(gray, ExtractionParams(centroid_background=follow))
+        dist, _ = _match(det, centres[:, 0], centres[:, 1], spacing)
+        err[follow] = dist
+    near = rim < 0.45 * spacing            # the rim crosses the glyph's patch
+    far = rim > 1.5 * spacing
+    assert near.sum() >= 10 and far.sum() >= 200
+    found = err[False] < 0.25 * spacing
+    # a flat mean counts the object's dark side as ink (the premise: centres pulled by
+    # about a pixel, measured 1.35 px rms); the threshold that follows the background
+    # about halves that (measured 0.68 px)
+    rms = {k: float(np.sqrt(np.mean(e[near & found] ** 2))) for k, e in err.items()}
+    assert rms[False] > 0.5, rms
+    assert rms[True] < 0.6 * rms[False], rms
+    # glyphs away from the rim: the same centres
+    np.testing.assert_array_equal(err[True][far], err[False][far])

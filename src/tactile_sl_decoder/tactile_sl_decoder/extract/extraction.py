@@ -16,7 +16,6 @@ there is no Python loop over glyphs.
 """
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field
 
@@ -25,9 +24,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.contract import PATCH_SIZE
+from tactile_sl_decoder.extract.centroid import closing_background, patch_centroid_offset
 
 _REMAP_MAX_ROWS = 32000  # cv2.remap wants maps smaller than SHRT_MAX rows
-_MOMENT_BLOCK = 256  # patches per product in patch_centroid_offset
 
 
 @dataclass
@@ -99,6 +98,13 @@ class ExtractionParams:
     centroid_plane_misfit: float = 0.15
     """A patch whose border pixels stray from their plane by more than this fraction of its
     level (rms) keeps the flat mean: its background is no plane (an object's texture)."""
+    centroid_background: bool = True
+    """... unless the image's local background (grey closing over 0.75 spacings: glyphs
+    removed) steps across it, at a dark object's rim: then the threshold follows that
+    background (single glyphs; :func:`~tactile_sl_decoder.extract.centroid.
+    patch_centroid_offset`)."""
+    centroid_background_step: float = 0.5
+    """The step, (max - min) / mean of the patch's background, above which it is followed."""
     rethreshold_large: bool = True
     """Look again inside regions too large to be glyphs, with a threshold from those
     regions' own pixels: a dark object touching the pad (seen through it between the glyphs)
@@ -236,10 +242,14 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
     if params.refine and ns:
         # binary centroids are quantised by the threshold; the grey-weighted centroid of the
         # (already resampled) patch is several times more precise under blur
+        back = (closing_background(gray, uu[:ns], vv[:ns], step[:ns], params.patch_size,
+                                   spacing) if params.centroid_background else None)
         du, dv = patch_centroid_offset(patches[:ns], params.dark_glyphs,
                                        flatten=params.centroid_flatten,
                                        level=params.centroid_level,
-                                       tolerance=params.centroid_plane_misfit)
+                                       tolerance=params.centroid_plane_misfit,
+                                       background=back,
+                                       background_step=params.centroid_background_step)
         uu[:ns] += du * step[:ns]
         vv[:ns] += dv * step[:ns]
     if params.refine and params.refine_split > 0 and len(uu) > ns:
@@ -436,129 +446,6 @@ def _median_nn(points: np.ndarray, sample: int = 64) -> float:
     probe = points[:: max(1, len(points) // sample)]
     dist, _ = tree.query(probe, k=2)
     return _median(dist[:, 1])
-
-
-def patch_centroid_offset(patches: np.ndarray, dark: bool = True, radius: float = 0.45,
-                          flatten: bool = False, level: float = 0.5,
-                          tolerance: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
-    """Grey-weighted centroid of each patch's central disc, in patch pixels from its centre.
-
-    Weights are how much darker (or brighter) than the patch mean a pixel is, inside a disc
-    of ``radius`` patch sides, which holds the glyph but not its neighbours.
-
-    With ``flatten`` the weights instead start at a tilted plane: the least-squares plane
-    through the patch's border pixels (at a patch span of one spacing they lie in the gaps
-    between glyphs: the local background), lowered to ``level`` of the way from the patch
-    mean (0) to the background at the centre (1), so max(plane - grey, 0).  A centre of
-    gravity is biased towards the darker side of a background that is not flat (B. F.
-    Alexander and K. C. Ng, "Elimination of systematic error in subpixel accuracy centroid
-    estimation", Optical Engineering 30(9), 1991, on threshold and background): under an
-    illumination gradient, a shadow's rim or a hot spot, a flat threshold takes in more of
-    the glyph's blurred edge (and of the background) on the dark side; a threshold parallel
-    to the background cuts the edge at the same relative depth all round.  ``level`` 0.5
-    rather than 0 counts more of each edge, where the position information is (sweep,
-    realistic lighting / exposure 3-D RMSE, measured before the misfit test below: 0.0101
-    mm / - at 0, 0.0098 / 0.0031 at 0.2, 0.0097 / 0.0028 at 0.35, 0.0097 / 0.0026 at 0.5,
-    0.0098 / 0.0026 at 0.65; flat mean 0.0103 / 0.0033; at 1 the background's noise comes in
-    and 2-D errors grow again).  A patch whose border strays from its plane by more than
-    ``tolerance`` times the plane's level (rms; set above sensor noise and a neighbour's
-    blurred edge, tuned on the sweep: 0.1 and 0.15 alike, 0.2 lets object_text rise to
-    0.0103 mm) has a background that is no plane, e.g. an object's texture seen through the
-    pad: a plane fit to it would tilt the threshold at random (realistic object_text 0.0096
-    -> 0.0105 mm without this test), so that patch keeps the flat mean threshold.
-    """
-    n, size = patches.shape[0], patches.shape[1]
-    flat = np.ascontiguousarray(patches.reshape(n, size * size))
-    kernels = _centroid_kernels(size, radius)
-    if flatten:
-        thresh = _threshold_planes(flat, size, level, tolerance)
-    else:
-        # the (rounded) patch mean, repeated over the patch
-        thresh = np.repeat(cv2.reduce(flat, 1, cv2.REDUCE_AVG, dtype=cv2.CV_8U), size * size,
-                           axis=1)
-    # uint8 arithmetic: the saturating difference is exactly max(threshold - grey, 0) (or
-    # max(grey - threshold, 0)), at a quarter of the memory traffic
-    weight = cv2.subtract(thresh, flat) if dark else cv2.subtract(flat, thresh)
-    weight = weight.astype(np.float32)
-    # thin products (rows, 324) x (324, 3), in blocks small enough (m*n*k < 2^18) that
-    # OpenBLAS keeps each on the calling thread whatever its thread count: on a busy machine
-    # BLAS worker threads spin and stall (cv2.gemm also stays on this thread, but is slower)
-    moments = np.empty((n, 3), np.float32)
-    for first in range(0, n, _MOMENT_BLOCK):
-        np.matmul(weight[first:first + _MOMENT_BLOCK], kernels,
-                  out=moments[first:first + _MOMENT_BLOCK])
-    total = np.maximum(moments[:, 0], 1e-6)
-    return moments[:, 1] / total, moments[:, 2] / total
-
-
-def _threshold_planes(flat: np.ndarray, size: int, level: float, tolerance: float
-                      ) -> np.ndarray:
-    """(n, size*size) uint8 thresholds of :func:`patch_centroid_offset` with ``flatten``.
-
-    Per patch the least-squares plane a + b x + c y through the border pixels and its
-    residual (||r||^2 = ||v||^2 - (A^T v) . coef for the least-squares coef of values v,
-    one product for both), the start level between the mean and a, the plane scaled to it
-    (flat at the mean where the border is no plane), evaluated at every pixel.
-    """
-    n = len(flat)
-    ring, fit, basis = _border_plane(size)
-    both = _border_products(size)
-    coef = np.empty((n, 3), np.float32)
-    misfit = np.empty(n, bool)
-    for first in range(0, n, _MOMENT_BLOCK):
-        border = flat[first:first + _MOMENT_BLOCK, ring].astype(np.float32)
-        prod = border @ both                                 # coef | A^T v
-        c = prod[:, :3]
-        resid = np.einsum("ij,ij->i", border, border) - np.einsum("ij,ij->i", prod[:, 3:], c)
-        coef[first:first + _MOMENT_BLOCK] = c
-        misfit[first:first + _MOMENT_BLOCK] = resid > (tolerance * c[:, 0]) ** 2 * len(ring)
-    mean = cv2.reduce(flat, 1, cv2.REDUCE_AVG, dtype=cv2.CV_32F)[:, 0]
-    back = coef[:, 0]
-    start = np.where(misfit, mean, (1.0 - level) * mean + level * back)
-    coef *= (start / np.maximum(back, 1.0))[:, None]
-    coef[misfit, 1:] = 0.0
-    thresh = np.empty(flat.shape, np.uint8)
-    for first in range(0, n, _MOMENT_BLOCK):
-        # rounded, saturated to 0..255 (abs: only a border far from any plane, which the
-        # misfit test flattens, could take the plane below 0)
-        thresh[first:first + _MOMENT_BLOCK] = cv2.convertScaleAbs(
-            coef[first:first + _MOMENT_BLOCK] @ basis)
-    return thresh
-
-
-@functools.lru_cache(maxsize=8)
-def _border_products(size: int) -> np.ndarray:
-    """(R, 6): the plane fit of :func:`_border_plane` and its design matrix A side by side."""
-    ring, fit, basis = _border_plane(size)
-    return np.ascontiguousarray(np.concatenate([fit, basis[:, ring].T], axis=1))
-
-
-@functools.lru_cache(maxsize=8)
-def _border_plane(size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Border pixels of a size x size patch and a plane a + b x + c y fitted to them.
-
-    Returns their flat indices, the (R, 3) transposed pseudo-inverse of their design matrix
-    (values @ fit = least-squares a, b, c) and the (3, size*size) basis that evaluates the
-    plane at every pixel (x, y from the patch centre).
-    """
-    g = np.arange(size, dtype=np.float64) - (size - 1) / 2.0
-    gx = np.broadcast_to(g[None, :], (size, size)).reshape(-1)
-    gy = np.broadcast_to(g[:, None], (size, size)).reshape(-1)
-    ring = np.flatnonzero(np.maximum(np.abs(gx), np.abs(gy)) > (size - 1) / 2.0 - 1.0)
-    design = np.stack([np.ones(len(ring)), gx[ring], gy[ring]], axis=1)
-    fit = np.ascontiguousarray(np.linalg.pinv(design).T, np.float32)
-    basis = np.ascontiguousarray(np.stack([np.ones_like(gx), gx, gy]), np.float32)
-    return ring, fit, basis
-
-
-@functools.lru_cache(maxsize=8)
-def _centroid_kernels(size: int, radius: float) -> np.ndarray:
-    """(size*size, 3) disc mask, disc * x and disc * y, for patch_centroid_offset."""
-    g = np.arange(size, dtype=np.float32) - (size - 1) / 2.0
-    gx = np.broadcast_to(g[None, :], (size, size)).reshape(-1)
-    gy = np.broadcast_to(g[:, None], (size, size)).reshape(-1)
-    disc = ((gx * gx + gy * gy) <= (radius * size) ** 2).astype(np.float32)
-    return np.ascontiguousarray(np.stack([disc, disc * gx, disc * gy], axis=1))
 
 
 def split_regions(labels: np.ndarray, stats: np.ndarray, ids: np.ndarray, k: np.ndarray,

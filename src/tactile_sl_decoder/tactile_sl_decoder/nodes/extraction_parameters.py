@@ -24,7 +24,7 @@ EXTRACTION_RANGES: dict[str, tuple[float, float]] = {
     "patch_span": (0.1, 10.0), "default_spacing_px": (1.0, 10000.0),
     "large_offset": (-255.0, 255.0), "refine_split": (0, 5),
     "split_centroid_radius": (0.05, 0.5), "centroid_level": (0.0, 1.0),
-    "centroid_plane_misfit": (0.0, 10.0),
+    "centroid_plane_misfit": (0.0, 10.0), "centroid_background_step": (0.0, 10.0),
 }
 READ_ONLY = frozenset({"patch_size"})     # the classifier's input size
 

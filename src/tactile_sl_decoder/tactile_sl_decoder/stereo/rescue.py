@@ -12,7 +12,7 @@ decoded its cell. Such a cell ``C`` is looked for in the target *image* at
 (raw pixels, over the lattice neighbours ``N`` of ``C`` decoded in both images; as in
 :mod:`.transfer`, the offset between the two views varies little from one glyph to the
 next). The glyph is measured there like every other single glyph: the grey-weighted
-centroid of its patch (:func:`~tactile_sl_decoder.extract.extraction.patch_centroid_offset`
+centroid of its patch (:func:`~tactile_sl_decoder.extract.centroid.patch_centroid_offset`
 with the extraction's threshold plane), re-sampled around the new centre and repeated
 (``passes``), since the prediction may miss by a fraction of a pixel. It then counts only if
 
@@ -219,7 +219,8 @@ def _measure(gray: np.ndarray, predicted: np.ndarray, symbol: np.ndarray, spacin
              classify: Callable[[np.ndarray], tuple[np.ndarray, Any]], p: RescueParams
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centres (M, 2), readings and acceptance of glyphs looked for at ``predicted``."""
-    from tactile_sl_decoder.extract.extraction import patch_centroid_offset, sample_patches
+    from tactile_sl_decoder.extract.centroid import patch_centroid_offset
+    from tactile_sl_decoder.extract.extraction import sample_patches
 
     size = int(extraction.patch_size)
     step = np.full(len(predicted), spacing * extraction.patch_span / size, np.float32)
