@@ -70,6 +70,9 @@ class StereoResult:
     frame_id: str = ""
     carried: int = 0               # glyphs (both images) labelled from the previous frame
     tracked: bool = False          # cells carried from the previous frame (no window search)
+    assisted: tuple[int, int] = (0, 0)  # cells of the left / right image that came from the
+                                        # other camera (transfer + rescue): that camera saw
+                                        # the glyph too poorly to decode or to find it
 
 
 @dataclass
@@ -123,6 +126,7 @@ class StereoPipeline:
         self._carry = (LabelCarry(self.params.carry), LabelCarry(self.params.carry))
         self._prev_cells: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
         self._full_decode_in = 0     # frames until the window search runs regardless
+        self.last_assisted = (0, 0)  # per image: cells from the other camera, last frame
         self._pool = None
         if self.params.threads > 1:
             self._pool = ThreadPoolExecutor(max_workers=2)
@@ -361,9 +365,11 @@ class StereoPipeline:
         the next frame, stay as decoded).  With the grey ``images``, a cell one image
         decoded and the other holds no glyph for is then measured in that image where the
         other puts it (:func:`~.stereo.rescue.rescue_pair`; the glyph arrays stay as
-        extracted).
+        extracted).  ``last_assisted`` then holds, per image, the cells it got from the
+        other camera in these two ways.
         """
         ncols = self.codebook.cols
+        self.last_assisted = (0, 0)
         uv_l = np.column_stack([left.u, left.v]).astype(np.float64)
         uv_r = np.column_stack([right.u, right.v]).astype(np.float64)
         rect_l, rect_r = left.rectified, right.rectified
@@ -375,10 +381,13 @@ class StereoPipeline:
             if rect_l is None or rect_r is None:
                 rect_l = StereoRig.rectify(rig.left, uv_l)
                 rect_r = StereoRig.rectify(rig.right, uv_r)
+            before = [int(np.count_nonzero(g.row >= 0)) for g in (left, right)]
             for g in (left, right):
                 g.row, g.col = g.row.copy(), g.col.copy()
-            transfer_cells(left, right, rect_l, rect_r, self.pattern.array,
-                           self.params.transfer)
+            if transfer_cells(left, right, rect_l, rect_r, self.pattern.array,
+                              self.params.transfer):
+                self.last_assisted = (int(np.count_nonzero(left.row >= 0)) - before[0],
+                                      int(np.count_nonzero(right.row >= 0)) - before[1])
         cl = np.where(left.row >= 0, left.row.astype(np.int64) * ncols + left.col, -1)
         cr = np.where(right.row >= 0, right.row.astype(np.int64) * ncols + right.col, -1)
         if images is not None and self.params.rescue.enabled and len(uv_l) and len(uv_r):
@@ -389,6 +398,8 @@ class StereoPipeline:
             if len(found[0].cell) or len(found[1].cell):
                 uv_l, cl, rect_l = _with_rescued(uv_l, cl, rect_l, found[0], rig.left)
                 uv_r, cr, rect_r = _with_rescued(uv_r, cr, rect_r, found[1], rig.right)
+                self.last_assisted = (self.last_assisted[0] + len(found[0].cell),
+                                      self.last_assisted[1] + len(found[1].cell))
         m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, self.params.stereo,
                                   rect_l, rect_r)
         # Points off the smooth surface their lattice neighbours define are dropped: a glyph
@@ -497,7 +508,7 @@ class StereoPipeline:
         t2 = time.perf_counter()
         result = StereoResult(points, left, right,
                               {"decode": 1e3 * (t1 - t0), "stereo": 1e3 * (t2 - t1)},
-                              rejected, rig.frame_id)
+                              rejected, rig.frame_id, assisted=self.last_assisted)
         result.tracked = tracked
         return result
 

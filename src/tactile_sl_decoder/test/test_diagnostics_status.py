@@ -97,6 +97,23 @@ def test_coverage_and_classifier():
     assert s["classifier"].level == ERROR
 
 
+def test_a_camera_that_needs_the_other_ones_cells_is_named():
+    """Cells one image got from the other camera (transfer, rescue): above 5 % of the
+    points the coverage status warns and names the camera that sees poorly."""
+    for assisted, level, camera in (((0, 0), OK, None), ((10, 0), OK, None),
+                                    ((0, 50), WARN, "right"), ((60, 5), WARN, "left")):
+        d = DecoderDiagnostics(now_s=0.0)
+        for _ in range(3):
+            d.frame(0.02, 0.05, FakeGlyphs(746, 746), FakeGlyphs(746, 746), 700,
+                    assisted=assisted)
+        s = _by_task(d.statuses(1.0))["coverage"]
+        assert s.level == level, (assisted, s.message)
+        if camera:
+            assert f"the {camera} camera sees part of the pad poorly" in s.message
+        assert float(s.values["from_left_camera_in_right"]) == assisted[1]
+        assert float(s.values["from_right_camera_in_left"]) == assisted[0]
+
+
 def test_touch_reference_state():
     d = DecoderDiagnostics()
     d.touch_state(True, False, frames_needed=2)

@@ -170,6 +170,9 @@ def test_the_pipeline_measures_a_patch_one_camera_misses(pressed):
     assert on.wrong == 0
     assert np.sqrt(np.mean(on.errors_m ** 2)) < 1.5 * np.sqrt(np.mean(every.errors_m ** 2))
     assert len(out[True].right) == len(out[False].right)   # the glyph arrays stay as found
+    # reported per image (the decoder's diagnostics name the camera that needed help)
+    assert out[True].assisted[0] == 0 and out[True].assisted[1] >= on.correct - off.correct
+    assert out[False].assisted == (0, 0)
 
 
 def test_the_symbols_path_does_not_rescue(pressed):

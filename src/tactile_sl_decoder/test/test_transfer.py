@@ -125,6 +125,7 @@ def test_a_region_one_camera_sees_badly_is_measured_through_the_other(pressed):
         out[enabled] = pipe.process(left, dim, li, ri)
         pipe.close()
     assert len(out[True].points) >= len(out[False].points) + 20
+    assert out[True].assisted[1] >= 20 and out[True].assisted[0] <= 2   # the smeared camera
     for result in out.values():
         g = result.right
         has = np.flatnonzero(g.row >= 0)

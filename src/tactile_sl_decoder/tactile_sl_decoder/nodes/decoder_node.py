@@ -435,7 +435,7 @@ class DecoderNode(Node):
         self._proc_ms.append(1e3 * proc_s)
         latency_s = (self.get_clock().now().nanoseconds - stamp_ns(left_msg.header)) * 1e-9
         self.diag.frame(proc_s, latency_s, result.left, result.right, len(result.points),
-                        result.rejected_pairs)
+                        result.rejected_pairs, result.assisted)
         if self.touch.enabled and self.touch.tares != self._tares_seen:
             self._tares_seen = self.touch.tares
             self._health_pending = True

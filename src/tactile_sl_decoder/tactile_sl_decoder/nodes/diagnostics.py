@@ -51,6 +51,10 @@ class DiagnosticLimits:
     """Share of unknown glyphs above which: ERROR (wrong weights, blur, wrong exposure)."""
     confidence_warn: float = 0.8
     """Mean classifier confidence below which: WARN."""
+    assisted_warn: float = 0.05
+    """Share of the points whose cell one image got from the other camera (that camera
+    found the glyph but could not read it, or did not find it) above which: WARN naming the
+    camera (a dirty lens, a dark corner, a shadow on one side)."""
     reference_residual_warn_m: float = 2e-5
     """RMS residual of the pad-frame fit of the touch reference above which: WARN, metres
     (the pad was touched or bent when the reference was taken)."""
@@ -102,6 +106,7 @@ class _Frames:
     points: list[int] = field(default_factory=list)      # per frame
     coverage: list[float] = field(default_factory=list)  # per frame
     rejected: int = 0
+    assisted: list[int] = field(default_factory=lambda: [0, 0])   # left, right, summed
     confidence_sum: float = 0.0
     labelled: int = 0
     unknown: int = 0
@@ -148,8 +153,11 @@ class DecoderDiagnostics:
         self.period.last_skip = reason
 
     def frame(self, proc_s: float, latency_s: float, left: Any, right: Any, points: int,
-              rejected: int = 0) -> None:
-        """A frame went through the pipeline; ``left``/``right`` are its Glyphs."""
+              rejected: int = 0, assisted: tuple[int, int] = (0, 0)) -> None:
+        """A frame went through the pipeline; ``left``/``right`` are its Glyphs.
+
+        ``assisted``: cells of the left / right image that came from the other camera.
+        """
         p = self.period
         p.decoded += 1
         self.totals["decoded"] += 1
@@ -157,6 +165,8 @@ class DecoderDiagnostics:
         p.latency_s.append(float(latency_s))
         p.points.append(int(points))
         p.rejected += int(rejected)
+        p.assisted[0] += int(assisted[0])
+        p.assisted[1] += int(assisted[1])
         found = []
         for g in (left, right):
             n = len(g)
@@ -314,9 +324,13 @@ class DecoderDiagnostics:
         coverage = float(np.mean(p.coverage)) if p.coverage else 0.0
         values = {"glyphs_per_image": _fmt(glyphs), "cells_per_image": _fmt(float(
             np.mean(p.cells))), "points_per_frame": _fmt(points), "coverage": _fmt(coverage),
-            "rejected_pairs": _fmt(p.rejected)}
+            "rejected_pairs": _fmt(p.rejected),
+            "from_right_camera_in_left": _fmt(p.assisted[0] / len(p.points)),
+            "from_left_camera_in_right": _fmt(p.assisted[1] / len(p.points))}
         text = (f"{points:.0f} cells decoded in both images of {glyphs:.0f} glyphs per image "
                 f"({100 * coverage:.0f} %)")
+        total = max(float(np.sum(p.points)), 1.0)
+        share = [a / total for a in p.assisted]
         if glyphs < lim.min_glyphs:
             return Status(name, WARN, f"{text}: few glyphs found (pad out of view, too dark, "
                           "out of focus?)", values)
@@ -325,6 +339,12 @@ class DecoderDiagnostics:
                           "pattern?), mirrored and the calibration", values)
         if coverage < lim.coverage_warn:
             return Status(name, WARN, f"{text}: low coverage", values)
+        side = int(np.argmax(share))
+        if share[side] > lim.assisted_warn:
+            camera, other = ("left", "right") if side == 0 else ("right", "left")
+            return Status(name, WARN, f"{text}; {100 * share[side]:.0f} % of the points "
+                          f"needed the {other} camera's cells: the {camera} camera sees part "
+                          "of the pad poorly (dirty lens, dark corner, shadow?)", values)
         return Status(name, OK, text, values)
 
     def _classifier(self) -> Status:
