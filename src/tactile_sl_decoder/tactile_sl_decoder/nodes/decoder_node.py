@@ -92,10 +92,11 @@ class DecoderNode(Node):
             "Seconds by which left/right stamps may differ when no exactly equal stamp "
             "exists (0 = exact stamps only, the contract's stereo convention).", (0.0, 10.0),
             apply=lambda v: setattr(self.sync, "slop_ns", int(v * 1e9))))
-        input_depth = int(decl("input_depth", 2,
+        input_depth = int(decl("input_depth", 1,
             "QoS history depth of the input subscriptions (sensor data, best effort). Small "
             "keeps latency low when the node falls behind: older frames are replaced by newer "
-            "ones in the middleware instead of queueing up.", (1, 1000), **ro))
+            "ones in the middleware instead of queueing up (1: only the newest frame waits).",
+            (1, 1000), **ro))
         queue_size = int(decl("queue_size", 5,
             "Unpaired messages kept per side while waiting for the stereo partner.", (1, 1000),
             apply=lambda v: setattr(self.sync, "queue_size", int(v))))
