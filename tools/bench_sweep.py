@@ -22,6 +22,10 @@ replay's code) and compares the points with the renderer's ground truth:
   threshold a label is unknown, neither).
 
 Figures, not pass/fail; the acceptance limits of issue 11 are printed next to them.
+Pictures (``--pictures DIR``, default out/sweep; rows of ``--picture-rows``, default the
+combined ones): the first frame of a row, both images side by side, each true glyph
+marked as measured (green: from a glyph the extraction found; magenta: found by
+the rescue, where the extraction found none), lost (red) or damaged (grey).
 """
 from __future__ import annotations
 
@@ -182,7 +186,8 @@ class Sweep:
             self._renderers[spacing] = Renderer(self.artwork, SimulatedCameraPair(rig))
         return self._renderers[spacing]
 
-    def run_row(self, names: list[str], level: int) -> RowFigures:
+    def run_row(self, names: list[str], level: int,
+                picture: pathlib.Path | None = None) -> RowFigures:
         from tactile_sl_camera.clouds import pack_points
         from tactile_sl_camera.sim.render import Nuisances
         from tactile_sl_decoder.stereo.stereo import StereoRig
@@ -220,6 +225,8 @@ class Sweep:
             out.correct += fm.correct
             out.errors.append(fm.errors_m)
             self._count_labels(out, res, t, undamaged)
+            if picture is not None and frame == 0:
+                write_picture(picture, f, res, self.artwork.cols)
         return out
 
     def _count_labels(self, out: RowFigures, res: Any, truth: Any, undamaged: np.ndarray
@@ -235,6 +242,42 @@ class Sweep:
             out.labelled += len(chosen)
             out.labels_right += int((label == true_label).sum())
             out.labels_misread += int(((label != true_label) & (label != LABEL_UNKNOWN)).sum())
+
+
+def write_picture(path: pathlib.Path, frame: Any, res: Any, cols: int) -> None:
+    """Both images side by side, every true glyph marked by what became of it.
+
+    Green: its cell is a point, measured at a glyph the extraction found in this image;
+    magenta: a point, but the extraction found no glyph there (the rescue measured it);
+    red: visible, undamaged and no point; grey: damaged print or dust (not counted).
+    """
+    import cv2
+    from scipy.spatial import cKDTree
+
+    t = frame.truth
+    spacing = max(res.left.spacing_px, res.right.spacing_px, 1.0)
+    have = set((res.points["row"].astype(np.int64) * cols + res.points["col"]).tolist())
+    damaged = t.damaged if t.damaged is not None else np.zeros(len(t.rows), bool)
+    panels = []
+    for gray, glyphs, px in ((frame.left, res.left, t.px_left),
+                             (frame.right, res.right, t.px_right)):
+        img = cv2.cvtColor(gray, cv2.COLOR_GRAY2BGR)
+        found = (cKDTree(np.column_stack([glyphs.u, glyphs.v])).query(px)[0] < 0.3 * spacing
+                 if len(glyphs) else np.zeros(len(px), bool))
+        for k in np.flatnonzero(t.visible):
+            centre = (int(round(px[k, 0])), int(round(px[k, 1])))
+            if damaged[k]:
+                colour = (128, 128, 128)
+            elif int(t.rows[k]) * cols + int(t.cols[k]) in have:
+                colour = (0, 200, 0) if found[k] else (255, 0, 255)
+            else:
+                colour = (0, 0, 255)
+            cv2.circle(img, centre, 2 if colour == (0, 200, 0) else 4, colour, -1)
+        panels.append(img)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp.png")
+    cv2.imwrite(str(tmp), np.hstack(panels))
+    tmp.replace(path)
 
 
 def table(results: list[tuple[str, str, dict[str, float]]]) -> str:
@@ -278,6 +321,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="classifier weights (default: the shipped ones), e.g. to compare")
     ap.add_argument("--no-write", action="store_true", help="do not update docs/robustness.md")
     ap.add_argument("--json", default=None, help="also write the figures as JSON")
+    ap.add_argument("--pictures", type=pathlib.Path, default=REPO / "out" / "sweep",
+                    help="folder of the rows' pictures (default out/sweep)")
+    ap.add_argument("--picture-rows", nargs="*", default=["combined"],
+                    help="rows drawn (first frame, both images): nuisance names")
     args = ap.parse_args(argv)
     rows = list(LEVELS) + ["combined"]
     if args.only:
@@ -291,7 +338,9 @@ def main(argv: list[str] | None = None) -> int:
     for name in rows:
         names = [n for n in LEVELS if n not in COMBINED_SKIP] if name == "combined" else [name]
         for level_name in args.levels:
-            s = sweep.run_row(names, LEVEL_NAMES.index(level_name)).summary()
+            picture = (args.pictures / f"{name}_{level_name}.png"
+                       if name in args.picture_rows else None)
+            s = sweep.run_row(names, LEVEL_NAMES.index(level_name), picture).summary()
             results.append((name, level_name, s))
             print(f"{name:15s} {level_name:9s} coverage {100 * s['coverage']:6.2f} %  "
                   f"wrong {s['wrong']:3d} ({100 * s['wrong_rate']:.3f} %)  "
