@@ -28,3 +28,27 @@ def test_bench_pipeline_in_process_runs_with_floor_touch_and_both_carry_settings
                     "total+touch  / floor serial", "accuracy, carry on", "accuracy, carry off"):
         assert section in out.stdout, section
     assert "no_contact" in out.stdout
+
+
+def test_bench_sweep_runs_a_row_writes_its_figures_and_its_picture(tmp_path):
+    """One sweep row of one frame: the JSON figures and the picture of both images (the
+    sweep is only run by `make bench` otherwise)."""
+    import json
+
+    import cv2
+
+    out = subprocess.run(
+        [sys.executable, str(REPO / "tools" / "bench_sweep.py"), "--only", "jpeg",
+         "--levels", "mild", "--frames", "1", "--no-write", "--json", str(tmp_path / "f.json"),
+         "--pictures", str(tmp_path), "--picture-rows", "jpeg"],
+        capture_output=True, text=True, timeout=300, env=ros_env(next_domain_id()))
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "| jpeg | mild |" in out.stdout
+    (row,) = json.loads((tmp_path / "f.json").read_text())
+    assert row["nuisance"] == "jpeg" and row["visible"] > 500
+    assert row["wrong"] == 0 and row["coverage"] > 0.99      # mild MJPEG: nearly all
+    img = cv2.imread(str(tmp_path / "jpeg_mild.png"))
+    assert img.shape == (480, 1280, 3)
+    # green marks (measured glyphs) on both halves
+    green = (img[:, :, 1] == 200) & (img[:, :, 0] == 0) & (img[:, :, 2] == 0)
+    assert green[:, :640].sum() > 1000 and green[:, 640:].sum() > 1000
