@@ -45,7 +45,7 @@ from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.glyphs import Glyphs
-from tactile_sl_decoder.stereo.transfer import _NEIGHBOUR_STEPS, _median_rows
+from tactile_sl_decoder.stereo.transfer import NEIGHBOUR_STEPS, median_rows
 
 
 @dataclass
@@ -177,8 +177,8 @@ def _predict(uv_s: np.ndarray, ts: np.ndarray, uv_d: np.ndarray, td: np.ndarray,
     missing = np.argwhere((ts >= 0) & (td < 0))                 # padded (row, col)
     if len(missing) == 0:
         return none
-    rr = missing[:, 0:1] + _NEIGHBOUR_STEPS[None, :, 0]
-    cc = missing[:, 1:2] + _NEIGHBOUR_STEPS[None, :, 1]
+    rr = missing[:, 0:1] + NEIGHBOUR_STEPS[None, :, 0]
+    cc = missing[:, 1:2] + NEIGHBOUR_STEPS[None, :, 1]
     ns, nd = ts[rr, cc], td[rr, cc]
     have = (ns >= 0) & (nd >= 0)
     keep = have.sum(axis=1) >= int(p.min_neighbours)
@@ -186,7 +186,7 @@ def _predict(uv_s: np.ndarray, ts: np.ndarray, uv_d: np.ndarray, td: np.ndarray,
         return none
     missing, ns, nd, have = missing[keep], ns[keep], nd[keep], have[keep]
     near = uv_d[nd] - uv_s[ns]                                   # (M, 8, 2), valid where have
-    shift = _median_rows(near, have)                             # (M, 2)
+    shift = median_rows(near, have)                             # (M, 2)
     predicted = uv_s[ts[missing[:, 0], missing[:, 1]]] + shift
     h, w = image_shape[:2]
     margin = 0.6 * spacing     # a glyph closer to the border is cut (extraction drops it)

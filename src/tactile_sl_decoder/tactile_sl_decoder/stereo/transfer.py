@@ -71,7 +71,7 @@ class TransferParams:
 
 
 # the 8 cell offsets of a cell's lattice neighbourhood
-_NEIGHBOUR_STEPS = np.array([(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)
+NEIGHBOUR_STEPS = np.array([(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)
                              if dr or dc], np.int64)
 
 
@@ -128,7 +128,7 @@ class _Side:
         return self._tree
 
 
-def _median_rows(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
+def median_rows(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Median of each row's valid entries, per last axis: (M, K, D), (M, K) -> (M, D).
 
     A sort with the invalid entries last (np.nanmedian goes through masked arrays: ~1 ms).
@@ -153,15 +153,15 @@ def _one_way(src: _Side, dst: _Side, symbols: np.ndarray, spacing: float,
     both = (ts >= 0) & (td >= 0)
     off = np.full((shape[0] + 2, shape[1] + 2, 2), np.nan)
     off[1:-1, 1:-1][both] = dst.rect[td[both]] - src.rect[ts[both]]
-    rr = missing[:, 0:1] + 1 + _NEIGHBOUR_STEPS[None, :, 0]
-    cc = missing[:, 1:2] + 1 + _NEIGHBOUR_STEPS[None, :, 1]
+    rr = missing[:, 0:1] + 1 + NEIGHBOUR_STEPS[None, :, 0]
+    cc = missing[:, 1:2] + 1 + NEIGHBOUR_STEPS[None, :, 1]
     have = np.isfinite(off[rr, cc, 0])                           # (M, 8)
     enough = have.sum(axis=1) >= int(p.min_neighbours)
     if not enough.any():
         return 0
     missing, rr, cc, have = missing[enough], rr[enough], cc[enough], have[enough]
     near = off[rr, cc]                                           # (M', 8, 2)
-    shift = _median_rows(near, have)                             # (M', 2)
+    shift = median_rows(near, have)                             # (M', 2)
     spread = np.where(have, np.linalg.norm(near - shift[:, None, :], axis=2), 0.0).max(axis=1)
     predicted = src.rect[ts[missing[:, 0], missing[:, 1]]] + shift
     dist, idx = dst.tree.query(predicted, k=2)
