@@ -30,9 +30,22 @@ def _one(**entry):
     return base
 
 
+def test_decoders_use_one_thread_each_where_cores_are_fewer_than_two_per_sensor():
+    two = {"sensors": [_one(), _one(namespace="b", left_device="/dev/v4l/by-id/l2",
+                                    right_device="/dev/v4l/by-id/r2")]}
+    assert [s.decoder.get("threads") for s in parse_sensors(two, cpus=2)] == [1, 1]
+    assert [s.decoder.get("threads") for s in parse_sensors(two, cpus=4)] == [None, None]
+    assert [s.decoder.get("threads") for s in parse_sensors(two, cpus=None)] == [None, None]
+    (s,) = parse_sensors({"sensors": [_one()]}, cpus=2)
+    assert "threads" not in s.decoder
+    two["sensors"][0]["decoder"] = {"threads": 2}          # the entry's own setting wins
+    assert [s.decoder.get("threads") for s in parse_sensors(two, cpus=2)] == [2, 1]
+
+
 def test_overrides_and_side_by_side():
     (s,) = parse_sensors({"sensors": [_one(frame_prefix="x_", mirrored=True,
-                                           camera={"fps": 15.0}, decoder={"min_votes": 3})]})
+                                           camera={"fps": 15.0}, decoder={"min_votes": 3})]},
+                         cpus=None)
     assert s.camera["fps"] == 15.0 and s.decoder == {"mirrored": True, "min_votes": 3,
                                                      "frame_prefix": "x_"}
     (s,) = parse_sensors({"sensors": [{"namespace": "b", "left_device": "/dev/v4l/by-id/sbs",

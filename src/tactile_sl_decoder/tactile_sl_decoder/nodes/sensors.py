@@ -13,10 +13,13 @@ One entry per sensor (config/sensors.yaml)::
 
 :func:`load_sensors` checks the list (names, duplicates, device paths) and returns, per
 sensor, the namespace and the parameter overrides of its ``stereo_camera`` and ``decoder``
-nodes, so the launch file only turns them into nodes.
+nodes, so the launch file only turns them into nodes. Where the machine has fewer than two
+cores per sensor, each decoder runs its two images on one thread (``threads`` 1, unless the
+entry sets it; :func:`decoder_threads`).
 """
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,8 +47,28 @@ class SensorConfig:
     decoder: dict[str, Any] = field(default_factory=dict)
 
 
-def parse_sensors(doc: Any, source: str = "sensors") -> list[SensorConfig]:
-    """Sensor configurations from the parsed YAML document."""
+def decoder_threads(sensors: int, cpus: int | None) -> int | None:
+    """The decoders' ``threads`` for ``sensors`` of them on ``cpus`` cores (None: default).
+
+    None leaves the node's default, 2. A decoder's second worker thread shortens a frame
+    only when a core is free for it; with fewer than two cores per decoder the decoders
+    contend for the cores (and each for its GIL) and the second thread costs more than it
+    gains. Measured with two sensors at 30 Hz on a 2-core machine (tools/bench_graph.py
+    --sensors 2, 60 s, two rounds alternating, 2026-12-02): 669-858 frames dropped of 1806
+    per sensor (mean 760) with threads 1, 850-913 (mean 883) with threads 2; p99 latency
+    105-134 against 109-131 ms (no difference).
+    """
+    if cpus is None or 2 * sensors <= cpus:
+        return None
+    return 1
+
+
+def parse_sensors(doc: Any, source: str = "sensors", cpus: int | None = -1
+                  ) -> list[SensorConfig]:
+    """Sensor configurations from the parsed YAML document.
+
+    ``cpus``: the cores the decoders share (-1: this machine's, None: leave ``threads``).
+    """
     if not isinstance(doc, dict) or not isinstance(doc.get("sensors"), list) \
             or not doc["sensors"]:
         raise SensorsFileError(f"{source}: expected a non-empty list under 'sensors:'")
@@ -93,7 +116,16 @@ def parse_sensors(doc: Any, source: str = "sensors") -> list[SensorConfig]:
     dup = sorted({d for d in devices if devices.count(d) > 1})
     if dup:
         raise SensorsFileError(f"{source}: device used twice: {dup}")
+    _set_decoder_threads(out, os.cpu_count() if cpus == -1 else cpus)
     return out
+
+
+def _set_decoder_threads(sensors: list[SensorConfig], cpus: int | None) -> None:
+    """Each decoder's ``threads`` from :func:`decoder_threads`, unless its entry sets it."""
+    threads = decoder_threads(len(sensors), cpus)
+    if threads is not None:
+        for sensor in sensors:
+            sensor.decoder.setdefault("threads", threads)
 
 
 def load_sensors(path: str | Path) -> list[SensorConfig]:
