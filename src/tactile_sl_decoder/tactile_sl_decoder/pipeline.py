@@ -126,7 +126,6 @@ class StereoPipeline:
         self._carry = (LabelCarry(self.params.carry), LabelCarry(self.params.carry))
         self._prev_cells: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
         self._full_decode_in = 0     # frames until the window search runs regardless
-        self.last_assisted = (0, 0)  # per image: cells from the other camera, last frame
         self._pool = None
         if self.params.threads > 1:
             self._pool = ThreadPoolExecutor(max_workers=2)
@@ -356,8 +355,10 @@ class StereoPipeline:
 
     def triangulate(self, left: Glyphs, right: Glyphs, rig: StereoRig,
                     images: tuple[np.ndarray, np.ndarray] | None = None
-                    ) -> tuple[np.ndarray, int]:
-        """Contract points from two decoded images, and the count of rejected pairs.
+                    ) -> tuple[np.ndarray, int, tuple[int, int]]:
+        """Contract points, rejected pairs, and per image the cells from the other camera.
+
+        The last is :attr:`StereoResult.assisted`.
 
         First a glyph one image could not decode takes the cell the other image decoded
         where the pair's geometry puts it (:func:`~.stereo.transfer.transfer_cells`); the
@@ -365,11 +366,10 @@ class StereoPipeline:
         the next frame, stay as decoded).  With the grey ``images``, a cell one image
         decoded and the other holds no glyph for is then measured in that image where the
         other puts it (:func:`~.stereo.rescue.rescue_pair`; the glyph arrays stay as
-        extracted).  ``last_assisted`` then holds, per image, the cells it got from the
-        other camera in these two ways.
+        extracted).
         """
         ncols = self.codebook.cols
-        self.last_assisted = (0, 0)
+        assisted = (0, 0)
         uv_l = np.column_stack([left.u, left.v]).astype(np.float64)
         uv_r = np.column_stack([right.u, right.v]).astype(np.float64)
         rect_l, rect_r = left.rectified, right.rectified
@@ -386,8 +386,8 @@ class StereoPipeline:
                 g.row, g.col = g.row.copy(), g.col.copy()
             if transfer_cells(left, right, rect_l, rect_r, self.pattern.array,
                               self.params.transfer):
-                self.last_assisted = (int(np.count_nonzero(left.row >= 0)) - before[0],
-                                      int(np.count_nonzero(right.row >= 0)) - before[1])
+                assisted = (int(np.count_nonzero(left.row >= 0)) - before[0],
+                            int(np.count_nonzero(right.row >= 0)) - before[1])
         cl = np.where(left.row >= 0, left.row.astype(np.int64) * ncols + left.col, -1)
         cr = np.where(right.row >= 0, right.row.astype(np.int64) * ncols + right.col, -1)
         if images is not None and self.params.rescue.enabled and len(uv_l) and len(uv_r):
@@ -398,8 +398,8 @@ class StereoPipeline:
             if len(found[0].cell) or len(found[1].cell):
                 uv_l, cl, rect_l = _with_rescued(uv_l, cl, rect_l, found[0], rig.left)
                 uv_r, cr, rect_r = _with_rescued(uv_r, cr, rect_r, found[1], rig.right)
-                self.last_assisted = (self.last_assisted[0] + len(found[0].cell),
-                                      self.last_assisted[1] + len(found[1].cell))
+                assisted = (assisted[0] + len(found[0].cell),
+                            assisted[1] + len(found[1].cell))
         m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, self.params.stereo,
                                   rect_l, rect_r)
         # Points off the smooth surface their lattice neighbours define are dropped: a glyph
@@ -408,9 +408,9 @@ class StereoPipeline:
                                self.params.outliers)
         if off.any():
             keep = ~off
-            return pack_points(m.xyz[keep], m.row[keep], m.col[keep]), m.rejected + int(
-                off.sum())
-        return pack_points(m.xyz, m.row, m.col), m.rejected
+            return (pack_points(m.xyz[keep], m.row[keep], m.col[keep]),
+                    m.rejected + int(off.sum()), assisted)
+        return pack_points(m.xyz, m.row, m.col), m.rejected, assisted
 
     # ------------------------------------------------------------------ whole frames
 
@@ -504,11 +504,11 @@ class StereoPipeline:
         else:
             self.decode_pair(left, right)
         t1 = time.perf_counter()
-        points, rejected = self.triangulate(left, right, rig, images)
+        points, rejected, assisted = self.triangulate(left, right, rig, images)
         t2 = time.perf_counter()
         result = StereoResult(points, left, right,
                               {"decode": 1e3 * (t1 - t0), "stereo": 1e3 * (t2 - t1)},
-                              rejected, rig.frame_id, assisted=self.last_assisted)
+                              rejected, rig.frame_id, assisted=assisted)
         result.tracked = tracked
         return result
 

@@ -43,9 +43,9 @@ from typing import Any, Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
+from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.glyphs import Glyphs
-from tactile_sl_decoder.stereo.transfer import NEIGHBOUR_STEPS, median_rows
+from tactile_sl_decoder.stereo.transfer import cell_table, predict_missing
 
 
 @dataclass
@@ -109,7 +109,7 @@ def rescue_pair(left: Glyphs, right: Glyphs, images: tuple[np.ndarray, np.ndarra
     p = params or RescueParams()
     if not p.enabled or len(left) == 0 or len(right) == 0:
         return Rescued.none(), Rescued.none()
-    tl, tr = _cell_table(left, symbols.shape), _cell_table(right, symbols.shape)
+    tl, tr = cell_table(left, symbols.shape), cell_table(right, symbols.shape)
     uvl = np.column_stack([left.u, left.v]).astype(np.float64)
     uvr = np.column_stack([right.u, right.v]).astype(np.float64)
     return (_one_way(uvr, tr, left, uvl, tl, images[0], symbols, extraction, classify, p),
@@ -168,37 +168,18 @@ def _one_way(uv_s: np.ndarray, ts: np.ndarray, dst: Glyphs, uv_d: np.ndarray, td
 def _predict(uv_s: np.ndarray, ts: np.ndarray, uv_d: np.ndarray, td: np.ndarray,
              image_shape: tuple[int, ...], spacing: float, p: RescueParams
              ) -> tuple[np.ndarray, np.ndarray]:
-    """Missing cells ((M, 2) row, col) with enough agreeing neighbours, and their places.
+    """Missing cells ((M, 2) row, col) with agreeing neighbours, and their places.
 
-    ``ts`` / ``td``: padded cell tables (:func:`_cell_table`), so that every cell of the
-    pattern has 8 neighbour entries (-1 off the pattern).
+    Only places far enough inside the image for a whole glyph are kept.
     """
-    none = np.zeros((0, 2), np.int64), np.zeros((0, 2))
-    missing = np.argwhere((ts >= 0) & (td < 0))                 # padded (row, col)
+    missing, predicted, spread = predict_missing(uv_s, ts, uv_d, td, p.min_neighbours)
     if len(missing) == 0:
-        return none
-    rr = missing[:, 0:1] + NEIGHBOUR_STEPS[None, :, 0]
-    cc = missing[:, 1:2] + NEIGHBOUR_STEPS[None, :, 1]
-    ns, nd = ts[rr, cc], td[rr, cc]
-    have = (ns >= 0) & (nd >= 0)
-    keep = have.sum(axis=1) >= int(p.min_neighbours)
-    if not keep.any():
-        return none
-    missing, ns, nd, have = missing[keep], ns[keep], nd[keep], have[keep]
-    near = uv_d[nd] - uv_s[ns]                                   # (M, 8, 2), valid where have
-    shift = median_rows(near, have)                             # (M, 2)
-    predicted = uv_s[ts[missing[:, 0], missing[:, 1]]] + shift
+        return missing, predicted
     h, w = image_shape[:2]
     margin = 0.6 * spacing     # a glyph closer to the border is cut (extraction drops it)
-    keep = ((predicted >= margin) & (predicted <= (w - 1 - margin, h - 1 - margin))).all(
-        axis=1)
-    if not keep.any():
-        return none
-    near, have, shift = near[keep], have[keep], shift[keep]
-    spread = np.where(have, np.hypot(*(near - shift[:, None, :]).transpose(2, 0, 1)),
-                      0.0).max(axis=1)
-    keep = np.flatnonzero(keep)[spread <= p.radius * spacing]
-    return missing[keep] - 1, predicted[keep]
+    keep = ((spread <= p.radius * spacing) & (predicted >= margin).all(axis=1)
+            & (predicted <= (w - 1 - margin, h - 1 - margin)).all(axis=1))
+    return missing[keep], predicted[keep]
 
 
 def _typical_contrast(dst: Glyphs, gray: np.ndarray, extraction: Any, spacing: float) -> float:
@@ -269,14 +250,3 @@ def _masks(size: int) -> tuple[np.ndarray, np.ndarray]:
     centre = np.flatnonzero((gx ** 2 + gy ** 2).ravel() <= (0.25 * size) ** 2)
     ring = np.flatnonzero((np.maximum(np.abs(gx), np.abs(gy)) > (size - 1) / 2.0 - 1.0).ravel())
     return centre, ring
-
-
-def _cell_table(g: Glyphs, shape: tuple[int, int]) -> np.ndarray:
-    """(rows + 2, cols + 2) index of the glyph holding each cell, -1 none.
-
-    One cell of padding all round, so that every cell's 8 neighbours can be looked up.
-    """
-    table = np.full((shape[0] + 2, shape[1] + 2), -1, np.int64)
-    has = np.flatnonzero(g.row != CELL_UNKNOWN)
-    table[g.row[has] + 1, g.col[has] + 1] = has
-    return table

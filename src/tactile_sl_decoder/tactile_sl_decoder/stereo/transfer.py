@@ -108,18 +108,57 @@ def needs_transfer(left: Glyphs, right: Glyphs) -> bool:
     return bool((left.row == CELL_UNKNOWN).any() or (right.row == CELL_UNKNOWN).any())
 
 
+def cell_table(g: Glyphs, shape: tuple[int, int]) -> np.ndarray:
+    """(rows + 2, cols + 2) index of the glyph holding each cell, -1 none.
+
+    One cell of padding all round, so that every cell's 8 neighbours can be looked up.
+    """
+    table = np.full((shape[0] + 2, shape[1] + 2), -1, np.int64)
+    ok = np.flatnonzero((g.row != CELL_UNKNOWN) & (g.row < shape[0]) & (g.col < shape[1]))
+    table[g.row[ok] + 1, g.col[ok] + 1] = ok
+    return table
+
+
+def predict_missing(pos_src: np.ndarray, ts: np.ndarray, pos_dst: np.ndarray,
+                    td: np.ndarray, min_neighbours: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the target image should show the cells only the source image holds.
+
+    ``ts`` / ``td``: padded cell tables (:func:`cell_table`) of the source and target
+    images, ``pos_src`` / ``pos_dst`` their glyphs' positions (any pixel convention, the
+    same in both). For each cell the source holds and the target does not, with at least
+    ``min_neighbours`` of its 8 lattice neighbours held by both: the cell (row, col), its
+    predicted target position (its source position plus the median offset target - source
+    of those neighbours) and the spread of those offsets about the median (largest
+    distance). Used by :func:`transfer_cells` and :mod:`.rescue`.
+    """
+    none = (np.zeros((0, 2), np.int64), np.zeros((0, 2)), np.zeros(0))
+    missing = np.argwhere((ts >= 0) & (td < 0))                 # padded (row, col)
+    if len(missing) == 0:
+        return none
+    rr = missing[:, 0:1] + NEIGHBOUR_STEPS[None, :, 0]
+    cc = missing[:, 1:2] + NEIGHBOUR_STEPS[None, :, 1]
+    ns, nd = ts[rr, cc], td[rr, cc]
+    have = (ns >= 0) & (nd >= 0)                                 # (M, 8)
+    keep = have.sum(axis=1) >= int(min_neighbours)
+    if not keep.any():
+        return none
+    missing, ns, nd, have = missing[keep], ns[keep], nd[keep], have[keep]
+    near = pos_dst[nd] - pos_src[ns]                             # (M, 8, 2), valid where have
+    shift = median_rows(near, have)                             # (M, 2)
+    spread = np.where(have, np.linalg.norm(near - shift[:, None, :], axis=2), 0.0).max(axis=1)
+    predicted = pos_src[ts[missing[:, 0], missing[:, 1]]] + shift
+    return missing - 1, predicted, spread
+
+
 class _Side:
     """One image's glyphs with its cell table and (built when first needed) k-d tree."""
 
     def __init__(self, glyphs: Glyphs, rect: np.ndarray, shape: tuple[int, int]) -> None:
         self.glyphs, self.rect = glyphs, np.asarray(rect, np.float64)
-        # (rows, cols) index of the glyph holding each cell (-1: none)
-        self.table = np.full(shape, -1, np.int64)
-        g = glyphs
-        ok = np.flatnonzero((g.row != CELL_UNKNOWN) & (g.row < shape[0]) & (g.col < shape[1]))
-        self.table[g.row[ok], g.col[ok]] = ok
+        self.table = cell_table(glyphs, shape)
         self._tree: cKDTree | None = None
-        self.undecoded = int((g.row == CELL_UNKNOWN).sum())    # glyphs a cell could go to
+        self.undecoded = int((glyphs.row == CELL_UNKNOWN).sum())  # glyphs a cell could go to
 
     @property
     def tree(self) -> cKDTree:
@@ -144,26 +183,10 @@ def _one_way(src: _Side, dst: _Side, symbols: np.ndarray, spacing: float,
     """One pass of cells decoded in ``src`` given to glyphs of ``dst``; returns the count."""
     if dst.undecoded == 0:
         return 0
-    ts, td = src.table, dst.table
-    missing = np.argwhere((ts >= 0) & (td < 0))                  # (M, 2) cells to look for
+    missing, predicted, spread = predict_missing(src.rect, src.table, dst.rect, dst.table,
+                                                 p.min_neighbours)
     if len(missing) == 0:
         return 0
-    # offsets dst - src of the cells both images hold, NaN elsewhere (one cell of padding)
-    shape = ts.shape
-    both = (ts >= 0) & (td >= 0)
-    off = np.full((shape[0] + 2, shape[1] + 2, 2), np.nan)
-    off[1:-1, 1:-1][both] = dst.rect[td[both]] - src.rect[ts[both]]
-    rr = missing[:, 0:1] + 1 + NEIGHBOUR_STEPS[None, :, 0]
-    cc = missing[:, 1:2] + 1 + NEIGHBOUR_STEPS[None, :, 1]
-    have = np.isfinite(off[rr, cc, 0])                           # (M, 8)
-    enough = have.sum(axis=1) >= int(p.min_neighbours)
-    if not enough.any():
-        return 0
-    missing, rr, cc, have = missing[enough], rr[enough], cc[enough], have[enough]
-    near = off[rr, cc]                                           # (M', 8, 2)
-    shift = median_rows(near, have)                             # (M', 2)
-    spread = np.where(have, np.linalg.norm(near - shift[:, None, :], axis=2), 0.0).max(axis=1)
-    predicted = src.rect[ts[missing[:, 0], missing[:, 1]]] + shift
     dist, idx = dst.tree.query(predicted, k=2)
     first, chosen, second = dist[:, 0], idx[:, 0], dist[:, 1]
     g = dst.glyphs
@@ -181,6 +204,6 @@ def _one_way(src: _Side, dst: _Side, symbols: np.ndarray, spacing: float,
     rows, cols, glyph = missing[ok, 0], missing[ok, 1], chosen[ok]
     g.row[glyph] = rows
     g.col[glyph] = cols
-    td[rows, cols] = glyph
+    dst.table[rows + 1, cols + 1] = glyph
     dst.undecoded -= len(glyph)
     return len(glyph)
