@@ -146,7 +146,11 @@ def predict_missing(pos_src: np.ndarray, ts: np.ndarray, pos_dst: np.ndarray,
     missing, ns, nd, have = missing[keep], ns[keep], nd[keep], have[keep]
     near = pos_dst[nd] - pos_src[ns]                             # (M, 8, 2), valid where have
     shift = median_rows(near, have)                             # (M, 2)
-    spread = np.where(have, np.linalg.norm(near - shift[:, None, :], axis=2), 0.0).max(axis=1)
+    # the largest distance, as the square root of the largest squared distance (the same
+    # value: the square root is monotonic and correctly rounded), one root per cell
+    d = near - shift[:, None, :]
+    spread = np.sqrt(np.where(have, d[:, :, 0] * d[:, :, 0] + d[:, :, 1] * d[:, :, 1],
+                              0.0).max(axis=1))
     predicted = pos_src[ts[missing[:, 0], missing[:, 1]]] + shift
     return missing - 1, predicted, spread
 
