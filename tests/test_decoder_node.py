@@ -4,6 +4,7 @@ The node runs as its own process (installed executable), on a ROS domain of its 
 ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST; the test publishes stereo frames from a bundled bag
 and listens for point clouds.
 """
+import pathlib
 import time
 
 import numpy as np
@@ -207,6 +208,9 @@ def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
     assert set(online) == set(frames), proc.lines()[-5:]
     for stamp in online:
         assert online[stamp] == offline[stamp]
+    # classification runs on numpy: torch (~3.5 s of CPU and ~190 MB at start) is not loaded
+    maps = pathlib.Path(f"/proc/{proc.process.pid}/maps").read_text()
+    assert "libtorch" not in maps and "libc10" not in maps
 
 
 def test_symbols_input_gives_the_same_points_as_images(ros, tmp_path):
@@ -253,6 +257,9 @@ def test_symbols_input_gives_the_same_points_as_images(ros, tmp_path):
     assert set(online) == set(frames), proc.lines()[-5:]
     for stamp in online:
         assert online[stamp] == offline[stamp]
+    # classification runs on numpy: torch (~3.5 s of CPU and ~190 MB at start) is not loaded
+    maps = pathlib.Path(f"/proc/{proc.process.pid}/maps").read_text()
+    assert "libtorch" not in maps and "libc10" not in maps
 
 
 def test_images_before_camera_info_still_give_a_cloud(ros):

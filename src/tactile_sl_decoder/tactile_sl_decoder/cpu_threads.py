@@ -1,4 +1,4 @@
-"""Thread settings of the libraries the pipeline calls (OpenCV, torch, BLAS, the GIL).
+"""Thread settings of the libraries the pipeline calls (OpenCV, BLAS, the GIL).
 
 Per frame the work is a few milliseconds in many library calls; on a small shared machine
 intra-op threads of several libraries only wait on each other, so the pipeline pins each
@@ -7,12 +7,13 @@ library to the threads it asks for. These settings are process-wide.
 from __future__ import annotations
 
 
-def set_cpu_threads(n: int, torch_too: bool = True) -> None:
-    """Intra-op threads of OpenCV, OpenBLAS and torch for this process (0 = leave them).
+def set_cpu_threads(n: int) -> None:
+    """Intra-op threads of OpenCV and OpenBLAS for this process (0 = leave them).
 
     Per frame the work is small (a few ms): with several threads per library on a small,
-    shared machine the threads wait on each other (torch inference measured 500 ms instead of
-    6 ms with 2 threads on 2 busy cores), so the pipeline runs them single-threaded.
+    shared machine the threads wait on each other (classifier inference, then on torch,
+    measured 500 ms instead of 6 ms with 2 threads on 2 busy cores), so the pipeline runs
+    them single-threaded.
     """
     if n <= 0:
         return
@@ -21,15 +22,6 @@ def set_cpu_threads(n: int, torch_too: bool = True) -> None:
     if cv2.getNumThreads() != n:
         cv2.setNumThreads(n)
     _set_blas_threads(n)
-    if not torch_too:
-        return
-    try:
-        import torch
-
-        if torch.get_num_threads() != n:
-            torch.set_num_threads(n)
-    except ImportError:
-        pass
 
 
 _BLAS_THREADS: list[int] = []      # the thread count last given to the loaded OpenBLAS copies

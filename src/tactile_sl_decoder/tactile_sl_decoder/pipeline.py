@@ -110,7 +110,7 @@ class StereoPipeline:
                  extractor: Callable[[np.ndarray, Any], Any] | None = None) -> None:
         self.pattern = PatternSpec.from_pattern(pattern)
         self.params = params or PipelineParams()
-        set_cpu_threads(self.params.cpu_threads, torch_too=False)   # torch: when classifying
+        set_cpu_threads(self.params.cpu_threads)
         self.codebook = Codebook(self.pattern.array, self.pattern.window,
                                  self.pattern.min_hamming, self.pattern.symbols,
                                  self.params.decode.max_errors, self.params.decode.max_erasures)
@@ -249,7 +249,6 @@ class StereoPipeline:
         """
         if any(len(g) and g.patches is not None for g in (left, right)):
             self._classifier()
-            set_cpu_threads(self.params.cpu_threads)
         return self._label([left, right], list(carries))
 
     def decode(self, glyphs: Glyphs) -> Glyphs:
@@ -435,7 +434,6 @@ class StereoPipeline:
             # of that image (OpenCV, the k-d tree and the classifier's matrix products
             # release the GIL).  The stage times are then the slower worker's (overlapping).
             self._classifier()
-            set_cpu_threads(self.params.cpu_threads)
             carry_l, carry_r = self._carries()
             (left, carried_l, *ms_l), (right, carried_r, *ms_r) = self._map(
                 self._extract_classify, (left_gray, rig.left, carry_l),

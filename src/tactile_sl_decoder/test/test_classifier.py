@@ -120,3 +120,37 @@ def test_shipped_weights_classify_synthetic_glyphs():
         correct += int((label == truth).sum())
         total += len(idx)
     assert total > 1000 and correct / total >= 0.99
+
+
+def test_weights_file_is_read_without_torch_exactly(tmp_path):
+    """The torch-free reader gives torch.load's tensors: views, offsets, dtypes, OrderedDict."""
+    from tactile_sl_decoder.classify.weights_file import read_torch_zip
+
+    base = torch.arange(60, dtype=torch.float32).reshape(6, 10)
+    blob = {"format": FORMAT, "nested": [1, 2.5, "x", (3, None)],
+            "state_dict": GlyphNet(3).state_dict(),          # an OrderedDict
+            "transposed": base.t(), "offset": base[2:, 3:7], "doubles": base.double() / 7,
+            "ints": torch.tensor([-3, 5], dtype=torch.int64), "flags": torch.tensor([True, False]),
+            "empty": torch.zeros((0, 4))}
+    path = tmp_path / "w.pt"
+    torch.save(blob, path)
+    ref = torch.load(path, weights_only=True)
+    got = read_torch_zip(path)
+    assert got["format"] == FORMAT and got["nested"] == [1, 2.5, "x", (3, None)]
+    assert list(got["state_dict"]) == list(ref["state_dict"])
+    for key in ("transposed", "offset", "doubles", "ints", "flags", "empty"):
+        want = ref[key].numpy()
+        assert got[key].dtype == want.dtype and got[key].shape == want.shape, key
+        assert np.array_equal(got[key], want), key
+    for key, value in ref["state_dict"].items():
+        assert np.array_equal(got["state_dict"][key], value.numpy()), key
+
+
+def test_truncated_weights_file_is_refused_clearly(tmp_path):
+    path = tmp_path / "w.pt"
+    save_blob(_blob(GlyphNet(3)), path)
+    cut = tmp_path / "cut.pt"
+    cut.write_bytes(path.read_bytes()[:len(path.read_bytes()) // 2])
+    with pytest.raises(ClassifierError, match="not a loadable weights file"):
+        Classifier.load(cut)
+

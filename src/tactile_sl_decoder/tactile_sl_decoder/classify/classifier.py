@@ -1,9 +1,13 @@
 """Glyph classification: load the shipped LeNet weights and label patches fast on one core.
 
-Training uses torch (:mod:`tactile_sl_decoder.classify.model`); inference computes the same function
-as a handful of large matrix products (torch tensors, single calls that release the GIL),
-because torch's default CPU path costs 7-9 ms for 1,000 patches of a net this small
-(framework overhead per layer, tiny convolutions), against a 4 ms budget:
+Training uses torch (:mod:`tactile_sl_decoder.classify.model`); inference computes the same
+function without torch, as a handful of large numpy matrix products (OpenBLAS calls that
+release the GIL, so the two images' workers overlap), because torch's default CPU path costs
+7-9 ms for 1,000 patches of a net this small (framework overhead per layer, tiny
+convolutions), and importing torch alone costs a process ~3.5 s of CPU at start.  The same
+products on torch tensors were no faster (1,493 patches on one core of the development VM:
+numpy 10.6-13.5 ms, torch 11.1-13.1 ms in alternating rounds; the two images in two threads
+7.4 vs 8.9 ms):
 
 * conv1: output row r depends on input rows r..r+4. The 14 output columns are split into
   blocks 0..7 and 8..13 (pooling pairs never straddle them), which read input columns 0..11
@@ -28,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_sl_decoder.classify.weights_file import WeightsFileError, read_torch_zip
 from tactile_sl_decoder.contract import LABEL_UNKNOWN, PATCH_SIZE
 
 FORMAT = "tactile_sl_classifier"
@@ -88,7 +93,6 @@ class FastLeNet:
     b4: np.ndarray
     w5: np.ndarray  # (64, classes)
     b5: np.ndarray
-    _torch: dict[str, Any] | None = field(default=None, repr=False)
 
     # conv1 output columns are split into two blocks that pooling never straddles, 0..7 and
     # 8..13, and ordered (pooled column, column parity, channel) inside each block
@@ -121,65 +125,62 @@ class FastLeNet:
             s["fc2.bias"], np.ascontiguousarray(s["out.weight"].T), s["out.bias"])
 
     def logits(self, patches: np.ndarray) -> np.ndarray:
-        """(N, classes) logits of (N, 18, 18) uint8 patches."""
-        return self.logits_tensor(patches).numpy()
-
-    def logits_tensor(self, patches: np.ndarray) -> Any:
-        """:meth:`logits` as a float32 torch tensor."""
-        import torch
-
-        if self._torch is None:
-            self._torch = {k: torch.from_numpy(np.ascontiguousarray(v))
-                           for k, v in self.__dict__.items() if isinstance(v, np.ndarray)}
-            self._torch["t2r"] = self._torch["t2"].reshape(5, 42, 48)
-        w = self._torch
+        """(N, classes) float32 logits of (N, 18, 18) uint8 patches."""
         n = patches.shape[0]
-        with torch.inference_mode():
-            x = torch.from_numpy(np.ascontiguousarray(patches))
-            x = x.reshape(n, PATCH_SIZE * PATCH_SIZE).float()
-            # per-patch standardisation (x - m) / s is applied after conv1 and pooling: it is
-            # a per-patch, per-channel affine map with positive scale, so it commutes with max
-            mean = x.mean(dim=1)
-            var = (x * x).mean(dim=1) - mean * mean
-            inv = 1.0 / (var.clamp_min(0.0).sqrt() + 1.0)
-            # the two column blocks' inputs, laid out so that the 5 input rows of one output
-            # row are consecutive values
-            x = x.view(n, PATCH_SIZE, PATCH_SIZE)
-            fa = x[:, :, 0:12].contiguous().view(n, PATCH_SIZE * 12)
-            fb = x[:, :, 8:18].contiguous().view(n, PATCH_SIZE * 10)
-            # one pooled row at a time, in two (N, 84) buffers that stay in cache: the even
-            # and the odd conv1 row, their maximum, then the maximum of column pairs
-            even = torch.empty((n, 84))
-            odd = torch.empty((n, 84))
-            pairs = even.view(n, 7, 2, 6)
-            p1 = torch.empty((7, n, 42))  # (pooled row, patch, (pooled col, channel))
-            ta, tb = w["t1a"], w["t1b"]
-            for k in range(7):  # 28 matrix products and 14 maxima, not a loop over glyphs
-                r = 2 * k
-                torch.mm(fa[:, r * 12:r * 12 + 60], ta, out=even[:, 0:48])
-                torch.mm(fb[:, r * 10:r * 10 + 50], tb, out=even[:, 48:84])
-                torch.mm(fa[:, r * 12 + 12:r * 12 + 72], ta, out=odd[:, 0:48])
-                torch.mm(fb[:, r * 10 + 10:r * 10 + 60], tb, out=odd[:, 48:84])
-                torch.maximum(even, odd, out=even)
-                torch.maximum(pairs[:, :, 0], pairs[:, :, 1], out=p1[k].view(n, 7, 6))
-            # relu((p1 - mean * s1) * inv + b1) = relu(p1 * inv + (b1 - mean * inv * s1))
-            shift = w["b1"] - (mean * inv)[:, None] * w["s1"]
-            torch.addcmul(shift, p1, inv[:, None], out=p1)
-            p1.clamp_(min=0.0)
-            z = torch.empty((3, n, 48))
-            for q in range(3):  # conv2 output row q = sum over its 5 kernel rows
-                torch.mm(p1[q], w["t2r"][0], out=z[q])
-                for dy in range(1, 5):
-                    z[q].addmm_(p1[q + dy], w["t2r"][dy])
-            r0 = torch.maximum(z[0], z[1])  # ceil-mode pooling of 3 rows: {0, 1}, {2}
-            r1 = z[2]
-            feats = torch.cat((torch.maximum(r0[:, 0:16], r0[:, 16:32]), r0[:, 32:48],
-                               torch.maximum(r1[:, 0:16], r1[:, 16:32]), r1[:, 32:48]), dim=1)
-            feats += w["b2"]
-            feats.clamp_(min=0.0)
-            h = torch.addmm(w["b3"], feats, w["w3"]).clamp_(min=0.0)
-            h = torch.addmm(w["b4"], h, w["w4"]).clamp_(min=0.0)
-            return torch.addmm(w["b5"], h, w["w5"])
+        x = np.ascontiguousarray(patches).reshape(n, PATCH_SIZE * PATCH_SIZE)
+        x = x.astype(np.float32)
+        # per-patch standardisation (x - m) / s is applied after conv1 and pooling: it is a
+        # per-patch, per-channel affine map with positive scale, so it commutes with max
+        mean = x.mean(axis=1)
+        var = np.einsum("ij,ij->i", x, x) / np.float32(x.shape[1]) - mean * mean
+        inv = np.float32(1.0) / (np.sqrt(np.maximum(var, np.float32(0.0))) + np.float32(1.0))
+        # the two column blocks' inputs, laid out so that the 5 input rows of one output row
+        # are consecutive values
+        cube = x.reshape(n, PATCH_SIZE, PATCH_SIZE)
+        fa = np.ascontiguousarray(cube[:, :, 0:12]).reshape(n, PATCH_SIZE * 12)
+        fb = np.ascontiguousarray(cube[:, :, 8:18]).reshape(n, PATCH_SIZE * 10)
+        # one pooled row at a time, in two (N, 84) buffers that stay in cache: the even and
+        # the odd conv1 row, their maximum, then the maximum of column pairs
+        even = np.empty((n, 84), np.float32)
+        odd = np.empty((n, 84), np.float32)
+        pairs = even.reshape(n, 7, 2, 6)
+        p1 = np.empty((7, n, 42), np.float32)  # (pooled row, patch, (pooled col, channel))
+        ta, tb = self.t1a, self.t1b
+        for k in range(7):  # 28 matrix products and 14 maxima, not a loop over glyphs
+            r = 2 * k
+            np.matmul(fa[:, r * 12:r * 12 + 60], ta, out=even[:, 0:48])
+            np.matmul(fb[:, r * 10:r * 10 + 50], tb, out=even[:, 48:84])
+            np.matmul(fa[:, r * 12 + 12:r * 12 + 72], ta, out=odd[:, 0:48])
+            np.matmul(fb[:, r * 10 + 10:r * 10 + 60], tb, out=odd[:, 48:84])
+            np.maximum(even, odd, out=even)
+            np.maximum(pairs[:, :, 0], pairs[:, :, 1], out=p1[k].reshape(n, 7, 6))
+        # relu((p1 - mean * s1) * inv + b1) = relu(p1 * inv + (b1 - mean * inv * s1))
+        p1 *= inv[:, None]
+        p1 += self.b1 - (mean * inv)[:, None] * self.s1
+        np.maximum(p1, np.float32(0.0), out=p1)
+        t2 = self.t2.reshape(5, 42, 48)
+        z = np.empty((3, n, 48), np.float32)
+        term = np.empty((n, 48), np.float32)
+        for q in range(3):  # conv2 output row q = sum over its 5 kernel rows
+            np.matmul(p1[q], t2[0], out=z[q])
+            for dy in range(1, 5):
+                np.matmul(p1[q + dy], t2[dy], out=term)
+                z[q] += term
+        r0 = np.maximum(z[0], z[1])  # ceil-mode pooling of 3 rows: {0, 1}, {2}
+        r1 = z[2]
+        feats = np.concatenate((np.maximum(r0[:, 0:16], r0[:, 16:32]), r0[:, 32:48],
+                                np.maximum(r1[:, 0:16], r1[:, 16:32]), r1[:, 32:48]), axis=1)
+        feats += self.b2
+        np.maximum(feats, np.float32(0.0), out=feats)
+        h = feats @ self.w3
+        h += self.b3
+        np.maximum(h, np.float32(0.0), out=h)
+        h2 = h @ self.w4
+        h2 += self.b4
+        np.maximum(h2, np.float32(0.0), out=h2)
+        out = h2 @ self.w5
+        out += self.b5
+        return out
 
 
 @dataclass
@@ -194,17 +195,19 @@ class Classifier:
 
     @staticmethod
     def load(path: str | Path | None = None, threshold: float | None = None) -> Classifier:
-        """Load weights written by ``tactile-sl train`` (default: the shipped ones)."""
-        import torch
+        """Load weights written by ``tactile-sl train`` (default: the shipped ones).
 
+        Read without torch (:mod:`.weights_file`): plain tensors only, like
+        ``torch.load(weights_only=True)``.
+        """
         path = Path(path) if path is not None else default_weights_path()
         if not path.is_file():
             raise ClassifierError(f"classifier weights {path} not found "
                                   f"(run `tactile-sl train` to create them)")
         try:
-            blob = torch.load(path, map_location="cpu", weights_only=True)
-        except Exception as exc:  # torch raises several types for corrupt / foreign files
-            raise ClassifierError(f"{path}: not a loadable weights file ({exc})") from exc
+            blob = read_torch_zip(path)
+        except WeightsFileError as exc:
+            raise ClassifierError(f"{path}: not a loadable weights file ({exc})") from None
         return Classifier.from_blob(blob, threshold, source=str(path))
 
     @staticmethod
@@ -230,28 +233,26 @@ class Classifier:
         return Classifier(net, classes, th, list(blob.get("primitives", [])), meta)
 
     def probabilities(self, patches: np.ndarray) -> np.ndarray:
-        """(N, classes) softmax probabilities of (N, 18, 18) uint8 patches."""
-        return self._probabilities(patches).numpy()
+        """(N, classes) float32 softmax probabilities of (N, 18, 18) uint8 patches."""
+        patches = _check_patches(patches)
+        if len(patches) == 0:
+            return np.zeros((0, self.classes), np.float32)
+        z = self.net.logits(patches)
+        z -= z.max(axis=1, keepdims=True)
+        np.exp(z, out=z)
+        z /= z.sum(axis=1, keepdims=True)
+        return z
 
     def predict(self, patches: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Labels (uint8, 255 below the threshold) and confidences (float32) of patches."""
-        prob = self._probabilities(patches)
+        prob = self.probabilities(patches)
         if prob.shape[0] == 0:
             return np.zeros(0, np.uint8), np.zeros(0, np.float32)
-        conf, label = prob.max(dim=1)
-        conf, label = conf.numpy(), label.numpy().astype(np.uint8)
+        label = prob.argmax(axis=1)
+        conf = prob[np.arange(len(label)), label]
+        label = label.astype(np.uint8)
         label[conf < self.threshold] = LABEL_UNKNOWN
         return label, conf
-
-    def _probabilities(self, patches: np.ndarray) -> Any:
-        import torch
-
-        patches = _check_patches(patches)
-        if len(patches) == 0:
-            return torch.zeros((0, self.classes))
-        z = self.net.logits_tensor(patches)
-        with torch.inference_mode():
-            return torch.softmax(z, dim=1)
 
 
 def _to_numpy(value: Any) -> np.ndarray:

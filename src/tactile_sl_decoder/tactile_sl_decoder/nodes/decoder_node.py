@@ -115,7 +115,7 @@ class DecoderNode(Node):
             "Worker threads for the two images of a frame: 2 extracts and classifies them "
             "concurrently, 1 = sequential.", (1, 2), **ro))
         params.cpu_threads = int(decl("cpu_threads", 1,
-            "Intra-op threads of OpenCV and torch in this process (0 = library defaults); "
+            "Intra-op threads of OpenCV and BLAS in this process (0 = library defaults); "
             "1 avoids oversubscription on small shared machines.", (0, 256), **ro))
         params.decode.min_votes = int(decl("min_votes", 2,
             "Agreeing window decodes needed before a glyph gets a cell.", (1, 100),

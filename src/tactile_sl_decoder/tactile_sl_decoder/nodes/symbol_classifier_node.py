@@ -17,6 +17,7 @@ from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.classify.classifier import Classifier
 from tactile_sl_decoder.contract import PATCH_SIZE
+from tactile_sl_decoder.cpu_threads import set_cpu_threads
 from tactile_sl_decoder.symbol_array import SymbolArrayError, fill_message, from_message
 from tactile_sl_msgs.msg import SymbolArray
 
@@ -38,11 +39,9 @@ class SymbolClassifierNode(Node):
             "keep_patches", False, "Forward the patches (debugging); the decoder does not "
             "need them.", apply=lambda v: setattr(self, "keep_patches", bool(v))))
         threads = int(live.declare(
-            "threads", 1, "torch CPU threads for inference (1 meets the budget on one core).",
+            "threads", 1, "BLAS threads for inference (1 meets the budget on one core).",
             (1, 256), read_only=True))
-        import torch
-
-        torch.set_num_threads(threads)
+        set_cpu_threads(threads)
         self.classifier = Classifier.load(weights)
         self.stored_threshold = float(self.classifier.threshold)
         self._set_threshold(threshold)
