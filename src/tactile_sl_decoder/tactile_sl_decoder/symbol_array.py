@@ -13,6 +13,7 @@ and skips the message.
 """
 from __future__ import annotations
 
+import array
 from typing import Any
 
 import numpy as np
@@ -22,6 +23,8 @@ from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 OPTIONAL_ARRAYS: dict[str, Any] = {"label": np.uint8, "area": np.float32,
                                    "confidence": np.float32, "row": np.int32, "col": np.int32}
 """SymbolArray arrays that may be empty (not carried), with their element types."""
+_TYPECODES = {np.dtype(np.float32): "f", np.dtype(np.uint8): "B", np.dtype(np.int32): "i"}
+"""array.array type codes of the SymbolArray element types (what rclpy stores)."""
 
 
 class SymbolArrayError(PipelineInputError):
@@ -53,7 +56,12 @@ def to_fields(glyphs: Glyphs, header: Any = None, with_patches: bool = True) -> 
 
 def fill_message(msg: Any, glyphs: Glyphs, header: Any = None,
                  with_patches: bool = True) -> Any:
-    """Fill an rclpy SymbolArray (arrays assigned as numpy: rclpy's fast paths); returns it."""
+    """Fill an rclpy SymbolArray; returns it.
+
+    Arrays are assigned as ``array.array``, which rclpy's generated setters store with one
+    buffer copy; a numpy array goes through Python floats one by one (per 750-value array
+    145 us against 1.8 us, measured: 2 ms of the decoder's frame for its two SymbolArrays).
+    """
     fields = to_fields(glyphs, with_patches=with_patches)
     if header is not None:
         msg.header = header
@@ -61,7 +69,11 @@ def fill_message(msg: Any, glyphs: Glyphs, header: Any = None,
         if key == "header":
             continue
         if key == "patches":
-            value = np.frombuffer(value, np.uint8) if value else np.zeros(0, np.uint8)
+            value = np.frombuffer(value, np.uint8)
+        if isinstance(value, np.ndarray):
+            typed = array.array(_TYPECODES[value.dtype])
+            typed.frombytes(np.ascontiguousarray(value).tobytes())
+            value = typed
         setattr(msg, key, value)
     return msg
 

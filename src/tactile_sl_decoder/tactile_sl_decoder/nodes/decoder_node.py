@@ -430,8 +430,9 @@ class DecoderNode(Node):
         if self.pub_sym:
             for side, glyphs, src in (("left", result.left, left_msg),
                                       ("right", result.right, right_msg)):
-                self.pub_sym[side].publish(make_symbol_array(glyphs, src.header,
-                                                             self.publish_patches))
+                if self.pub_sym[side].get_subscription_count():   # built only when heard
+                    self.pub_sym[side].publish(make_symbol_array(glyphs, src.header,
+                                                                 self.publish_patches))
         proc_s = time.perf_counter() - t0
         self._proc_ms.append(1e3 * proc_s)
         latency_s = (self.get_clock().now().nanoseconds - stamp_ns(left_msg.header)) * 1e-9

@@ -238,10 +238,15 @@ class TouchOutputs:
         if result is None:
             return
         f = self.frame_id
-        self.pub_field.publish(cloud_msg(field_fields(result, stamp, f)))
-        self.pub_wrench.publish(wrench_msg(wrench_fields(result, stamp, f)))
-        self.pub_contact.publish(contact_msg(contact_fields(result.contact, stamp, f)))
-        self.pub_depth.publish(image_msg(depth_fields(result.depth, stamp, f)))
+        # each message is built only when something subscribes to it (a recorder does)
+        if self.pub_field.get_subscription_count():
+            self.pub_field.publish(cloud_msg(field_fields(result, stamp, f)))
+        if self.pub_wrench.get_subscription_count():
+            self.pub_wrench.publish(wrench_msg(wrench_fields(result, stamp, f)))
+        if self.pub_contact.get_subscription_count():
+            self.pub_contact.publish(contact_msg(contact_fields(result.contact, stamp, f)))
+        if self.pub_depth.get_subscription_count():
+            self.pub_depth.publish(image_msg(depth_fields(result.depth, stamp, f)))
 
     def _announce_reference(self, stamp: tuple[int, int], camera_frame: str) -> None:
         ref = self.stage.reference
