@@ -180,9 +180,14 @@ def test_bad_input_is_warned_skipped_and_survived(ros):
 
 
 def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
-    """`tactile-sl replay` on a bag and the node fed the same frames give identical clouds."""
+    """`tactile-sl replay` on a bag and the node fed the same frames give identical clouds;
+    the node's symbols_decoded carry the in-process pipeline's glyphs, labels and cells."""
     from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_camera.images import to_gray
     from tactile_sl_decoder.cli import main as cli_main
+    from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
+    from tactile_sl_decoder.symbol_array import from_message
+    from tactile_sl_msgs.msg import SymbolArray
 
     out = tmp_path / "out.mcap"
     assert cli_main(["replay", str(BAG), "-o", str(out), "--no-progress"]) == 0
@@ -193,7 +198,16 @@ def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
 
     proc = ros.start()
     pubs, clouds = _io(ros)
+    symbols = {"left": {}, "right": {}}    # symbols_decoded: built only while subscribed
+    subs = [ros.node.create_subscription(
+        SymbolArray, f"/tactile/{side}/symbols_decoded",
+        lambda m, side=side: symbols[side].__setitem__(
+            (m.header.stamp.sec, m.header.stamp.nanosec), m), 10) for side in symbols]
     _wait_matched(ros, pubs)
+    end = time.monotonic() + 20.0
+    while not all(sub.get_publisher_count() for sub in subs) and time.monotonic() < end:
+        ros.spin(0.05)
+    ros.spin(0.5)     # the decoder's side of the match
     msgs = _bag_messages(3)
     frames = {}
     for kind, side, m in msgs:
@@ -208,6 +222,19 @@ def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
     assert set(online) == set(frames), proc.lines()[-5:]
     for stamp in online:
         assert online[stamp] == offline[stamp]
+    # the decoded glyphs of both images, as the same pipeline gives them in process
+    ros.spin(0.5)
+    pipe = StereoPipeline(PatternSpec.load())
+    for stamp, parts in sorted(frames.items()):
+        part = {(kind, side): m for kind, side, m in parts}
+        res = pipe.process(to_gray(part[("image", "left")]), to_gray(part[("image", "right")]),
+                           part[("info", "left")], part[("info", "right")])
+        for side, want in (("left", res.left), ("right", res.right)):
+            assert stamp in symbols[side], f"no {side}/symbols_decoded for {stamp}"
+            got = from_message(symbols[side][stamp])
+            assert len(got) == len(want) > 100
+            for key in ("u", "v", "label", "row", "col"):
+                assert np.array_equal(getattr(got, key), getattr(want, key)), (side, key)
     # classification runs on numpy: torch (~3.5 s of CPU and ~190 MB at start) is not loaded
     maps = pathlib.Path(f"/proc/{proc.process.pid}/maps").read_text()
     assert "libtorch" not in maps and "libc10" not in maps
@@ -257,9 +284,6 @@ def test_symbols_input_gives_the_same_points_as_images(ros, tmp_path):
     assert set(online) == set(frames), proc.lines()[-5:]
     for stamp in online:
         assert online[stamp] == offline[stamp]
-    # classification runs on numpy: torch (~3.5 s of CPU and ~190 MB at start) is not loaded
-    maps = pathlib.Path(f"/proc/{proc.process.pid}/maps").read_text()
-    assert "libtorch" not in maps and "libc10" not in maps
 
 
 def test_images_before_camera_info_still_give_a_cloud(ros):
