@@ -154,3 +154,23 @@ def test_truncated_weights_file_is_refused_clearly(tmp_path):
     with pytest.raises(ClassifierError, match="not a loadable weights file"):
         Classifier.load(cut)
 
+
+
+def test_a_layout_the_reader_does_not_know_goes_to_torch(tmp_path, monkeypatch):
+    """Weights a newer torch lays out otherwise still load (through torch.load)."""
+    from tactile_sl_decoder.classify import classifier as classifier_module
+    from tactile_sl_decoder.classify.weights_file import WeightsFileError
+
+    model = GlyphNet(3).eval()
+    path = tmp_path / "w.pt"
+    save_blob(_blob(model), path)
+
+    def unknown(_path):
+        raise WeightsFileError("refusing to unpickle torch._utils._rebuild_tensor_v9")
+
+    monkeypatch.setattr(classifier_module, "read_torch_zip", unknown)
+    clf = Classifier.load(path)
+    patches = np.random.default_rng(1).integers(0, 256, (20, 18, 18), dtype=np.uint8)
+    with torch.no_grad():
+        ref = model(standardise(torch.from_numpy(patches))).numpy()
+    assert np.abs(clf.net.logits(patches) - ref).max() < 1e-4 * max(1.0, np.abs(ref).max())

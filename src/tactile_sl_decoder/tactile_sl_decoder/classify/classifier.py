@@ -198,7 +198,8 @@ class Classifier:
         """Load weights written by ``tactile-sl train`` (default: the shipped ones).
 
         Read without torch (:mod:`.weights_file`): plain tensors only, like
-        ``torch.load(weights_only=True)``.
+        ``torch.load(weights_only=True)``.  A file that reader does not know (another torch
+        version's layout) goes to ``torch.load(weights_only=True)`` when torch is installed.
         """
         path = Path(path) if path is not None else default_weights_path()
         if not path.is_file():
@@ -207,7 +208,7 @@ class Classifier:
         try:
             blob = read_torch_zip(path)
         except WeightsFileError as exc:
-            raise ClassifierError(f"{path}: not a loadable weights file ({exc})") from None
+            blob = _torch_load(path, exc)
         return Classifier.from_blob(blob, threshold, source=str(path))
 
     @staticmethod
@@ -253,6 +254,19 @@ class Classifier:
         label = label.astype(np.uint8)
         label[conf < self.threshold] = LABEL_UNKNOWN
         return label, conf
+
+
+def _torch_load(path: Path, reason: WeightsFileError) -> Any:
+    """``torch.load(weights_only=True)`` of a file the torch-free reader refused."""
+    try:
+        import torch
+    except ImportError:
+        raise ClassifierError(f"{path}: not a loadable weights file ({reason})") from None
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises several types for corrupt / foreign files
+        raise ClassifierError(f"{path}: not a loadable weights file ({reason}; torch.load: "
+                              f"{exc})") from None
 
 
 def _to_numpy(value: Any) -> np.ndarray:
