@@ -5,7 +5,7 @@ Usage: python tools/bench_extraction.py [--repeat 200] [--bag bags/sphere_deep_s
                                        [--stages]
 
 Images: synthetic glyph grids (~1,000-1,150 glyphs, tactile_sl_decoder.tooling.synth_glyphs) and,
-if given, the left images of a bag. Threads of OpenBLAS/OpenMP/torch/OpenCV are limited to
+if given, the left images of a bag. Threads of OpenBLAS/OpenMP/OpenCV are limited to
 one and the process is pinned to one CPU. Prints the median and 90th percentile of the wall
 time and of the thread CPU time (the latter is what a core actually spent; on a shared, busy
 machine the wall time also counts time the scheduler gave to other processes).
@@ -24,9 +24,9 @@ import time  # noqa: E402
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
-import torch  # noqa: E402
 
 from tactile_sl_decoder.classify.classifier import Classifier  # noqa: E402
+from tactile_sl_decoder.cpu_threads import set_cpu_threads  # noqa: E402
 from tactile_sl_decoder.extract import extraction as ex  # noqa: E402
 from tactile_sl_decoder.extract.centroid import patch_centroid_offset  # noqa: E402
 from tactile_sl_decoder.extract.extraction import extract_symbols  # noqa: E402
@@ -106,8 +106,7 @@ def main() -> int:
     parser.add_argument("--stages", action="store_true",
                         help="also time each extraction stage alone")
     args = parser.parse_args()
-    torch.set_num_threads(1)
-    cv2.setNumThreads(1)
+    set_cpu_threads(1)
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     clf = Classifier.load()
@@ -115,9 +114,9 @@ def main() -> int:
                                   for s in range(4)]}
     if args.bag:
         sets[os.path.basename(args.bag)] = bag_images(args.bag, 4)
-    print(f"one core: torch threads {torch.get_num_threads()}, cv2 threads "
-          f"{cv2.getNumThreads()}, affinity {sorted(os.sched_getaffinity(0))}; machine load "
-          f"average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+    print(f"one core: BLAS and cv2 threads {cv2.getNumThreads()}, affinity "
+          f"{sorted(os.sched_getaffinity(0))}; machine load average {os.getloadavg()[0]:.2f} "
+          f"on {os.cpu_count()} CPUs")
     for name, images in sets.items():
         dets = [extract_symbols(g) for g in images]
         glyphs = int(np.mean([len(d) for d in dets]))

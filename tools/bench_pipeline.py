@@ -117,18 +117,10 @@ def _pipeline(args: argparse.Namespace, carry: bool = True):
 
 
 def _set_threads(n: int) -> None:
-    """Intra-op threads of OpenCV and torch (0 = leave their defaults)."""
-    if n <= 0:
-        return
-    import cv2
+    """Intra-op threads of OpenCV and OpenBLAS (0 = leave their defaults)."""
+    from tactile_sl_decoder.cpu_threads import set_cpu_threads
 
-    cv2.setNumThreads(n)
-    try:
-        import torch
-
-        torch.set_num_threads(n)
-    except ImportError:
-        pass
+    set_cpu_threads(n)
 
 
 class Floor:
@@ -487,7 +479,7 @@ def main() -> int:
     p.add_argument("--threads", type=int, default=2,
                    help="pipeline worker threads for the two images (default 2, as the node)")
     p.add_argument("--cpu-threads", type=int, default=1,
-                   help="OpenCV / torch intra-op threads (0 = library defaults)")
+                   help="OpenCV / BLAS intra-op threads (0 = library defaults)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per frame")
     p.add_argument("--warmup", type=int, default=1, help="untimed runs per frame first")
     p.add_argument("--carry", choices=("on", "off", "both"), default="on",
