@@ -69,10 +69,12 @@ def fill_message(msg: Any, glyphs: Glyphs, header: Any = None,
         if key == "header":
             continue
         if key == "patches":
-            value = np.frombuffer(value, np.uint8)
-        if isinstance(value, np.ndarray):
+            typed = array.array("B")
+            typed.frombytes(value)                                 # bytes: one copy
+            value = typed
+        elif isinstance(value, np.ndarray):
             typed = array.array(_TYPECODES[value.dtype])
-            typed.frombytes(np.ascontiguousarray(value).tobytes())
+            typed.frombytes(memoryview(np.ascontiguousarray(value)).cast("B"))   # one copy
             value = typed
         setattr(msg, key, value)
     return msg
