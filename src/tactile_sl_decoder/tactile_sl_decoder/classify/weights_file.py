@@ -66,12 +66,11 @@ def read_torch_zip(path: str | Path) -> Any:
                 raise WeightsFileError(f"storage {key} is missing") from None
             return np.frombuffer(raw, dtype.newbyteorder("<" if order == "little" else ">"))
 
-        unpickler = _Unpickler(io.BytesIO(archive.read(pickles[0])), storage)
         try:
-            return unpickler.load()
+            return _Unpickler(io.BytesIO(archive.read(pickles[0])), storage).load()
         except WeightsFileError:
             raise
-        except Exception as exc:   # a truncated or malformed pickle: say so, no traceback
+        except Exception as exc:   # a corrupt archive entry or a malformed pickle: say so
             raise WeightsFileError(f"unreadable pickle ({type(exc).__name__}: {exc})") from None
 
 
