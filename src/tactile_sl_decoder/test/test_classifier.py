@@ -174,3 +174,19 @@ def test_a_layout_the_reader_does_not_know_goes_to_torch(tmp_path, monkeypatch):
     with torch.no_grad():
         ref = model(standardise(torch.from_numpy(patches))).numpy()
     assert np.abs(clf.net.logits(patches) - ref).max() < 1e-4 * max(1.0, np.abs(ref).max())
+
+
+def test_corrupt_archive_entry_is_a_weights_file_error(tmp_path):
+    """A bad CRC inside the archive is reported, not raised as a zipfile traceback."""
+    from tactile_sl_decoder.classify.weights_file import WeightsFileError, read_torch_zip
+
+    path = tmp_path / "w.pt"
+    save_blob(_blob(GlyphNet(3)), path)
+    data = bytearray(path.read_bytes())
+    at = data.find(FORMAT.encode())
+    data[at:at + 4] = b"XXXX"                       # inside data.pkl: its CRC no longer fits
+    path.write_bytes(bytes(data))
+    with pytest.raises(WeightsFileError, match="CRC"):
+        read_torch_zip(path)
+    with pytest.raises(ClassifierError):
+        Classifier.load(path)
