@@ -74,7 +74,7 @@ def fill_message(msg: Any, glyphs: Glyphs, header: Any = None,
             value = typed
         elif isinstance(value, np.ndarray):
             typed = array.array(_TYPECODES[value.dtype])
-            typed.frombytes(memoryview(np.ascontiguousarray(value)).cast("B"))   # one copy
+            typed.frombytes(np.ascontiguousarray(value).data.cast("B"))   # one copy
             value = typed
         setattr(msg, key, value)
     return msg
