@@ -54,7 +54,7 @@ bench: setup
 	@$(ENV) python tools/bench_pipeline.py --ros --rate 30 --seconds 10
 	@$(ENV) python tools/bench_graph.py
 	@$(ENV) python tools/bench_calibration.py
-	@$(ENV) nice -n 10 python tools/bench_sweep.py
+	@$(ENV) nice -n 10 python tools/bench_sweep.py --bound
 	@$(ENV) python tools/bench_touch.py
 
 clean:

@@ -105,3 +105,26 @@ def test_dust_darkens_fixed_specks_and_flags_their_glyphs(renderer):
     assert a.left[v, u] < clean.left[v, u]
     assert a.truth.damaged.sum() > 0
     assert np.array_equal(a.truth.visible, clean.truth.visible)
+
+
+def test_linear_signal_and_printing_only_some_cells(renderer):
+    """The analysis renders (tools/bench_sweep.py --bound): the linear signal is the image
+    before noise, gamma and quantisation, and the image is linear in which glyphs are printed."""
+    nz = Nuisances(noise_sigma=0.0, shot_noise=0.0, see_through="dark", object_albedo=0.3)
+    image = renderer.render(PRESS, nz, seed=4).left
+    linear = renderer.render(PRESS, nz, seed=4, linear=True)
+    assert linear.left.dtype == np.float32
+    # the same values but for the last bit of the 8-bit conversion's rounding
+    assert np.abs(np.clip(linear.left, 0, 255) - image).max() <= 0.5 + 1e-3
+    art = renderer.artwork
+    cells = art.rows * art.cols
+    none = renderer.render(PRESS, nz, seed=4, ink_cells=np.zeros(cells, bool), linear=True)
+    one_in_nine = (np.arange(cells) // art.cols % 3 == 0) & (np.arange(cells) % art.cols % 3 == 0)
+    part = renderer.render(PRESS, nz, seed=4, ink_cells=one_in_nine, linear=True)
+    rest = renderer.render(PRESS, nz, seed=4, ink_cells=~one_in_nine, linear=True)
+    # ink only darkens; the glyphs' shares add up to the whole print
+    assert (none.left >= linear.left - 1e-3).all() and none.left.max() > linear.left.max() - 1
+    own = part.left - none.left
+    assert own.min() < -20 and np.allclose(own + rest.left, linear.left, atol=0.05)
+    # the printed cells' truth is the same scene's
+    assert np.array_equal(part.truth.px_left, linear.truth.px_left)

@@ -573,8 +573,14 @@ class Renderer:
 
     def render_camera(  # noqa: C901 - the nuisances, one pass in a fixed order
             self, index: int, fld: FieldGrid, nz: Nuisances, rng: np.random.Generator,
-            exposure: float, color: bool, seed: int = 0) -> np.ndarray:
-        """One camera's image (uint8, grey or BGR); ``seed`` fixes print damage and dust."""
+            exposure: float, color: bool, seed: int = 0, ink_cells: np.ndarray | None = None,
+            linear: bool = False) -> np.ndarray:
+        """One camera's image (uint8, grey or BGR); ``seed`` fixes print damage and dust.
+
+        ``ink_cells`` (bool per cell, row-major): print only these cells' glyphs (paper
+        elsewhere). ``linear``: return the float32 signal in grey levels before read and shot
+        noise, gamma, 8-bit quantisation and MJPEG (what a noise model acts on).
+        """
         cam = self.rig.cameras[index]
         table = self._tables[index]
         h, w = cam.height, cam.width
@@ -610,6 +616,10 @@ class Renderer:
             E[win] = cv2.resize(self._irradiance(P, n, nz), (ww, wh),
                                 interpolation=cv2.INTER_LINEAR)
         texture = self.print_damage(nz, seed)[0] if nz.damages_print else self._texture
+        if ink_cells is not None:
+            cell = self._cell_index()[0]
+            printed = np.asarray(ink_cells, bool).ravel()[np.where(cell >= 0, cell, 0)]
+            texture = np.where((cell >= 0) & printed, texture, np.float32(1.0))
         mask = self._contact_mask(fld, nz) if nz.see_through else None
         seen = None
         if mask is None:
@@ -660,14 +670,16 @@ class Renderer:
         if nz.vignetting:
             out *= self._vignette(cam, nz.vignetting)[:, :, None]
         signal = out * np.float32(255.0 * nz.white_level / float(np.mean(nz.paper)) * exposure)
+        if linear:
+            return signal[:, :, 0] if channels == 1 else signal
         if nz.shot_noise > 0 or nz.noise_sigma > 0:
             std = np.sqrt(np.float32(nz.noise_sigma**2)
                           + np.float32(nz.shot_noise) * np.maximum(signal, 0.0))
             signal = signal + std * rng.standard_normal(signal.shape, dtype=np.float32)
-        linear = np.clip(signal * np.float32(1 / 255.0), 0.0, 1.0)
+        unit = np.clip(signal * np.float32(1 / 255.0), 0.0, 1.0)
         if nz.gamma != 1.0:
-            linear = linear ** np.float32(1.0 / nz.gamma)
-        img = np.rint(linear * np.float32(255.0)).astype(np.uint8)
+            unit = unit ** np.float32(1.0 / nz.gamma)
+        img = np.rint(unit * np.float32(255.0)).astype(np.uint8)
         img = img[:, :, 0] if channels == 1 else img
         if nz.jpeg_quality:
             ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, int(nz.jpeg_quality)])
@@ -764,10 +776,13 @@ class Renderer:
 
     def render(self, contacts: Sequence[Contact | LoadContact],
                nuisances: Nuisances | None = None,
-               seed: int = 0, frame_index: int = 0, color: bool = False) -> StereoFrame:
+               seed: int = 0, frame_index: int = 0, color: bool = False,
+               ink_cells: np.ndarray | None = None, linear: bool = False) -> StereoFrame:
         """Render one stereo frame and its ground truth (deterministic for seed, frame).
 
-        With load contacts the truth carries :attr:`GroundTruth.touch`.
+        With load contacts the truth carries :attr:`GroundTruth.touch`. ``ink_cells`` and
+        ``linear`` as in :meth:`render_camera` (for analyses: a glyph's own share of the
+        image, the noise-free signal); the same seed gives the same scene either way.
         """
         nz = nuisances or Nuisances()
         fld = self.build_field(contacts)
@@ -782,8 +797,8 @@ class Renderer:
                 [int(seed), int(frame_index), 2]).standard_normal(2)
             exp_l = max(exposure * (1.0 + float(j[0])), 0.0)
             exp_r = max(exposure * nz.exposure_right * (1.0 + float(j[1])), 0.0)
-        left = self.render_camera(0, fld, nz, rng, exp_l, color, seed)
-        right = self.render_camera(1, fld, nz, rng, exp_r, color, seed)
+        left = self.render_camera(0, fld, nz, rng, exp_l, color, seed, ink_cells, linear)
+        right = self.render_camera(1, fld, nz, rng, exp_r, color, seed, ink_cells, linear)
         truth = self.ground_truth(fld, nz, seed=seed)
         if any(is_load(c) for c in contacts):
             truth.touch = self.touch_truth(contacts, fld, truth)
