@@ -75,6 +75,9 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
     parser.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
                         help="extra decoder parameter (repeatable), e.g. "
                              "pipeline.threads:=1")
+    parser.add_argument("--stage-param", action="append", default=[], metavar="NAME:=VALUE",
+                        help="with --chain: extra parameter of every symbol_extractor and "
+                             "symbol_classifier (repeatable), e.g. qos.input.depth:=1")
     parser.add_argument("--domain-id", type=int, default=int(os.environ.get("BENCH_DOMAIN_ID", 29)))
     parser.add_argument("--logs", type=pathlib.Path, default=REPO / "out" / "bench_graph")
     args = parser.parse_args()
@@ -120,9 +123,11 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
                 decoder_args += ["-p", "input:=symbols",
                                  "-r", "left/symbols:=left/labelled_symbols",
                                  "-r", "right/symbols:=right/labelled_symbols"]
+                stage_params = [a for item in args.stage_param for a in ("-p", item)]
                 for side in ("left", "right"):
                     for exe, extra in (("symbol_extractor", ["-r", "image:=image_raw"]),
                                        ("symbol_classifier", [])):
+                        extra = [*extra, *stage_params]
                         procs[f"{exe} {ns}/{side}"] = subprocess.Popen(
                             [str(executable("tactile_sl_decoder", exe)), "--ros-args",
                              "-r", f"__ns:={ns}/{side}", *extra],
