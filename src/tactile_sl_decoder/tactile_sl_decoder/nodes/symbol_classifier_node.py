@@ -47,8 +47,9 @@ class SymbolClassifierNode(Node):
         self._set_threshold(threshold)
         self.pub = self.create_publisher(SymbolArray, "labelled_symbols", declare_qos(
             live, "output", "the labelled_symbols publisher", 10))
+        # Depth 1: only the newest frame waits when the node falls behind (latency).
         self.sub = self.create_subscription(SymbolArray, "symbols", self.on_symbols, declare_qos(
-            live, "input", "the symbols subscription", 10))
+            live, "input", "the symbols subscription", 1))
         self.get_logger().info(f"classifier {self.classifier.meta.get('arch')} with "
                                f"{self.classifier.classes} classes, threshold "
                                f"{self.classifier.threshold:.2f}")

@@ -44,8 +44,10 @@ class SymbolExtractorNode(Node):
         cv2.setNumThreads(threads)
         self.pub = self.create_publisher(SymbolArray, "symbols", declare_qos(
             self.live, "output", "the symbols publisher", 10))
+        # Depth 1 (sensor data, newest only): when the node falls behind the middleware
+        # replaces the waiting image instead of queueing old ones (latency, bench_graph).
         self.sub = self.create_subscription(Image, "image", self.on_image, declare_qos(
-            self.live, "input", "the image subscription", 5, "best_effort"))
+            self.live, "input", "the image subscription", 1, "best_effort"))
         self.count = 0
         self.busy = 0.0
 
