@@ -128,3 +128,5 @@ def test_linear_signal_and_printing_only_some_cells(renderer):
     assert own.min() < -20 and np.allclose(own + rest.left, linear.left, atol=0.05)
     # the printed cells' truth is the same scene's
     assert np.array_equal(part.truth.px_left, linear.truth.px_left)
+    with pytest.raises(ValueError, match="ink_cells has 3 entries"):
+        renderer.render(PRESS, nz, ink_cells=np.ones(3, bool))

@@ -785,6 +785,10 @@ class Renderer:
         image, the noise-free signal); the same seed gives the same scene either way.
         """
         nz = nuisances or Nuisances()
+        cells = self.artwork.rows * self.artwork.cols
+        if ink_cells is not None and np.asarray(ink_cells).size != cells:
+            raise ValueError(f"ink_cells has {np.asarray(ink_cells).size} entries; the artwork "
+                             f"has {cells} cells (row-major)")
         fld = self.build_field(contacts)
         rng = np.random.default_rng([int(seed), int(frame_index)])
         exposure = nz.exposure * (1.0 + nz.exposure_jitter * float(rng.standard_normal())) \
