@@ -109,3 +109,29 @@ def test_chain_labels_images_and_survives_bad_input(tmp_path, domain_id):
     assert "skipping image" in text["symbol_extractor"]
     assert "skipping SymbolArray" in text["symbol_classifier"]
     assert "Traceback" not in "".join(text.values())
+
+
+def test_extractor_max_rate_takes_frames_by_stamp(tmp_path, domain_id):
+    """``max_rate`` 2: of ten images stamped 0.1 s apart, those of the two 0.5 s slots' first
+    stamps are extracted (what the other camera's extractor takes too)."""
+    with running_node("tactile_sl_decoder", "symbol_extractor", domain_id,
+                      ["-r", "__ns:=/t", "-p", "max_rate:=2.0", "-p", "publish_patches:=false"],
+                      tmp_path / "extractor.log") as extractor, \
+            Probe("probe", domain_id, namespace="/t") as probe:
+        got: list[SymbolArray] = []
+        probe.node.create_subscription(SymbolArray, "symbols", got.append, QoSProfile(depth=50))
+        images = probe.node.create_publisher(Image, "image", qos_profile_sensor_data)
+        assert probe.spin_until(lambda: images.get_subscription_count() > 0
+                                and probe.node.count_publishers("symbols") > 0, 30.0)
+        gray = synth_image(np.random.default_rng(0), spacing=18.0).gray
+        for k in range(10):
+            msg = Image(**image_fields(gray))
+            msg.header.stamp.sec, msg.header.stamp.nanosec = 30, k * 100_000_000
+            for _ in range(3):          # best effort: each stamp sent thrice, taken once
+                images.publish(msg)
+                probe.spin(0.05)
+        probe.spin_until(lambda: len(got) >= 2, 10.0)
+        probe.spin(0.5)
+        assert extractor.process.poll() is None
+    stamps = sorted((m.header.stamp.sec, m.header.stamp.nanosec) for m in got)
+    assert stamps == [(30, 0), (30, 500_000_000)], stamps

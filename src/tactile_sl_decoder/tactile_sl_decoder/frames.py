@@ -163,3 +163,31 @@ class StereoSync:
                 del self.pending[s][old]
                 ev.dropped.append((s, old, "no stereo partner in time (unsynchronised)"))
         return ev
+
+
+class StampThrottle:
+    """At most ``max_rate`` frames per second, chosen by header stamp, not by arrival.
+
+    A frame is taken when its stamp falls in another slot of ``1 / max_rate`` seconds
+    (rounded to whole nanoseconds; integer arithmetic, so both cameras' nodes agree exactly)
+    than the last frame taken. The two cameras of a stereo pair
+    carry equal stamps (the contract's convention), so two nodes throttling each camera's
+    stream on their own take the *same* frames: an overloaded stage chain keeps whole
+    stereo pairs instead of dropping frames on each side independently, which the decoder
+    then cannot pair. ``max_rate`` 0 takes every frame. A stamp that goes back (a bag played
+    again) starts over.
+    """
+
+    def __init__(self, max_rate: float = 0.0) -> None:
+        self.max_rate = float(max_rate)
+        self._last_slot: int | None = None
+
+    def accept(self, stamp_ns: int) -> bool:
+        """Whether to process the frame with this stamp (and remember it if so)."""
+        if self.max_rate <= 0:
+            return True
+        slot = int(stamp_ns) // max(1, round(1e9 / self.max_rate))
+        if slot == self._last_slot:
+            return False
+        self._last_slot = slot
+        return True

@@ -10,7 +10,7 @@ from tactile_sl_camera.bag_io import BagReader, BagWriter
 from tactile_sl_camera.camera_info import CameraCalibration, camera_info_fields
 from tactile_sl_camera.clouds import cloud_fields, cloud_to_arrays, pack_points
 from tactile_sl_camera.images import image_fields
-from tactile_sl_decoder.frames import StereoSync, bag_frames
+from tactile_sl_decoder.frames import StampThrottle, StereoSync, bag_frames
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 from tactile_sl_decoder.symbol_array import from_message
@@ -169,6 +169,26 @@ def test_stereo_sync_pairs_exact_then_slop_and_bounds_queues():
     ev = s4.add("left", 10**9, "L0")
     assert ev.reset and not ev.pairs
     assert s4.add("right", 10**9, "R0").pairs == [(10**9, "L0", "R0")]
+
+
+def test_stamp_throttle_takes_the_same_frames_of_both_cameras():
+    # 30 Hz stamps with +-2 ms jitter, seen by both cameras' nodes
+    rng = np.random.default_rng(2)
+    stamps = [1_700_000_000 * 10**9 + int(k * 33_333_333 + rng.integers(-2_000_000, 2_000_000))
+              for k in range(300)]
+    left, right = StampThrottle(15.0), StampThrottle(15.0)
+    took_left = [s for s in stamps if left.accept(s)]
+    took_right = [s for s in stamps if right.accept(s)]
+    assert took_left == took_right
+    assert 148 <= len(took_left) <= 152                      # ~15 of every 30
+    gaps = np.diff(took_left)
+    assert gaps.min() > 20_000_000 and gaps.max() < 110_000_000
+    # off: every frame; a bag played again (stamps go back) starts over
+    off = StampThrottle(0.0)
+    assert all(off.accept(s) for s in stamps[:10])
+    again = StampThrottle(10.0)
+    assert again.accept(stamps[100]) and not again.accept(stamps[100] + 1)
+    assert again.accept(stamps[0])
 
 
 def test_symbol_array_messages_convert_and_are_checked():

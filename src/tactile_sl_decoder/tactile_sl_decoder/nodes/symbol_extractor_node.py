@@ -4,7 +4,10 @@ Topics (relative, remap as needed): ``image`` in (sensor_msgs/Image, sensor-data
 mono8, bgr8, rgb8 ...), ``symbols`` out (tactile_sl_msgs/SymbolArray, reliable, labels 255
 and cells -1 until the classifier and decoder fill them). Parameters mirror
 :class:`~tactile_sl_decoder.extract.extraction.ExtractionParams` (config/symbol_extractor.yaml),
-with ranges, applied live (``patch_size`` and ``threads`` at start only).
+with ranges, applied live (``patch_size`` and ``threads`` at start only). ``max_rate``
+(0: every image) takes at most that many images per second, chosen by stamp
+(:class:`~tactile_sl_decoder.frames.StampThrottle`), so the two cameras' extractors of a
+stage chain on a machine too slow for the camera rate take the same frames.
 A message that cannot be used (unsupported encoding, empty or truncated image) is skipped
 with a throttled warning; the node never dies on input.
 """
@@ -22,6 +25,7 @@ from tactile_sl_camera.images import ImageFormatError, to_gray
 from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.extract.extraction import extract_symbols
+from tactile_sl_decoder.frames import StampThrottle
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
 from tactile_sl_decoder.symbol_array import fill_message
@@ -38,6 +42,12 @@ class SymbolExtractorNode(Node):
         self.publish_patches = bool(self.live.declare(
             "publish_patches", True, "Send the 18x18 patches (the classifier node needs them).",
             apply=lambda v: setattr(self, "publish_patches", bool(v))))
+        self.throttle = StampThrottle(float(self.live.declare(
+            "max_rate", 0.0, "Images per second at most, chosen by header stamp (0: every "
+            "image). Both cameras' extractors take the same frames, so a stage chain on a "
+            "machine too slow for the camera rate keeps whole stereo pairs for the decoder.",
+            (0.0, 1000.0), apply=lambda v: setattr(self.throttle, "max_rate", float(v)))))
+        self.throttled = 0
         threads = int(self.live.declare(
             "threads", 1, "OpenCV threads (1: one image uses one core; run one node per "
             "camera).", (1, 256), read_only=True))
@@ -56,6 +66,10 @@ class SymbolExtractorNode(Node):
 
     def on_image(self, msg: Image) -> None:
         """Extract and publish; bad input is logged and skipped."""
+        stamp = msg.header.stamp
+        if not self.throttle.accept(int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)):
+            self.throttled += 1
+            return
         try:
             gray = to_gray(msg)
         except (ImageFormatError, ValueError) as exc:
@@ -74,7 +88,8 @@ class SymbolExtractorNode(Node):
         self.count += 1
         if self.count % 100 == 0:
             self.get_logger().debug(f"{self.count} images, "
-                                    f"{1000 * self.busy / self.count:.2f} ms each")
+                                    f"{1000 * self.busy / self.count:.2f} ms each, "
+                                    f"{self.throttled} left out by max_rate")
 
 
 def main(args: list[str] | None = None) -> None:
