@@ -208,20 +208,21 @@ class Sweep:
         from tactile_sl_camera.clouds import pack_points
         from tactile_sl_camera.sim.render import Nuisances
         from tactile_sl_decoder.stereo.stereo import StereoRig
+        from tactile_sl_decoder.tooling.centre_bound import frame_point_bounds
         from tactile_sl_decoder.tooling.e2e_metrics import frame_metrics
 
         out = RowFigures()
         for frame in range(self.frames):
             doc, spacing = level_nuisances(names, level, frame)
-            scene = {"blur_sigma": 0.5, "noise_sigma": 0.8, "shot_noise": 0.02,
-                     "vignetting": 0.2, **doc}
-            nz = Nuisances.from_dict(scene)
+            nz = Nuisances.from_dict({"blur_sigma": 0.5, "noise_sigma": 0.8, "shot_noise": 0.02,
+                                      "vignetting": 0.2, **doc})
             renderer = self.renderer(spacing)
             seed = self.seed + 101 * level + frame
             f = renderer.render(frame_contacts(frame), nz, seed=seed, frame_index=frame)
             rig = StereoRig(renderer.rig.left_info, renderer.rig.right_info)
             if self.bound:
-                out.bounds.append(self._frame_bound(renderer, rig, scene, seed, frame, spacing))
+                out.bounds.append(frame_point_bounds(renderer, rig, frame_contacts(frame), nz,
+                                                     seed, frame, spacing))
             self.pipeline.forget_frames()    # each frame is a scene of its own, not a stream
             t0 = time.perf_counter()
             res = self.pipeline.process(f.left, f.right, rig, rig)
@@ -248,53 +249,6 @@ class Sweep:
             if picture is not None and frame == 0:
                 write_picture(picture, f, res, self.artwork.cols)
         return out
-
-    def _frame_bound(self, renderer: Any, rig: Any, scene: dict[str, Any], seed: int,
-                     frame: int, spacing: float) -> np.ndarray:
-        """CRLB (m^2) of every visible undamaged glyph's point in one frame.
-
-        The same scene (same seed: same exposures, dust and damage) rendered as its linear
-        signal before noise, gamma, quantisation and MJPEG sets the noise; a glyph's own
-        share of it is that signal with only every third row and column of glyphs printed
-        minus the signal without any glyph (the image is linear in the print), so the
-        neighbours' ink does not count as information about a glyph's position. The noise
-        model is the scene's (tooling/centre_bound.py).
-        """
-        from tactile_sl_camera.sim.render import Nuisances
-        from tactile_sl_decoder.tooling.centre_bound import (
-            centre_covariance_bound,
-            point_error_bound,
-        )
-
-        nz = Nuisances.from_dict(scene)
-        contacts = frame_contacts(frame)
-        rows, cols = self.artwork.rows, self.artwork.cols
-
-        def linear(ink: np.ndarray | None) -> Any:
-            return renderer.render(contacts, nz, seed=seed, frame_index=frame, ink_cells=ink,
-                                   linear=True)
-
-        full = linear(None)
-        t = full.truth
-        keep = t.visible & ~t.damaged if t.damaged is not None else t.visible
-        blank = linear(np.zeros(rows * cols, bool))
-        cell_row, cell_col = np.divmod(np.arange(rows * cols), cols)
-        half = int(np.ceil(1.5 * spacing))      # the blurred footprint; next glyph 3 away
-        read, shot = float(scene["noise_sigma"]), float(scene["shot_noise"])
-        covs = np.full((2, len(t.rows), 2, 2), np.inf)
-        for a in range(3):
-            for b in range(3):
-                sel = keep & (t.rows % 3 == a) & (t.cols % 3 == b)
-                if not sel.any():
-                    continue
-                part = linear((cell_row % 3 == a) & (cell_col % 3 == b))
-                for side, (img, own, base, px) in enumerate((
-                        (full.left, part.left, blank.left, t.px_left),
-                        (full.right, part.right, blank.right, t.px_right))):
-                    covs[side, sel] = centre_covariance_bound(
-                        img, px[sel], half, read, shot, glyph_signal=own - base)
-        return point_error_bound(rig, t.px_left[keep], t.px_right[keep], covs[0, keep],
-                                 covs[1, keep])
 
     def _count_labels(self, out: RowFigures, res: Any, truth: Any, undamaged: np.ndarray
                       ) -> None:

@@ -1,5 +1,6 @@
 """The Cramer-Rao bound of glyph centres and 3-D points (tooling/centre_bound.py)."""
 import numpy as np
+import pytest
 
 from tactile_sl_camera.sim.optics import RigParams, SimulatedCameraPair
 from tactile_sl_decoder.stereo.stereo import StereoRig
@@ -98,3 +99,26 @@ def test_best_share_rmse_keeps_the_smallest_bounds():
     assert best_share_rmse(b, 1.0) == np.sqrt(15.0 / 4)
     assert best_share_rmse(b, 0.5) == 1.0
     assert np.isnan(best_share_rmse(b, 0.1))
+
+
+@pytest.mark.slow          # 20 renders, ~6 s
+def test_frame_bounds_of_a_simulated_press_scale_with_the_read_noise():
+    """Read noise only: the information is 1 / sigma^2, so doubling sigma quadruples every
+    glyph's bound exactly; every visible glyph gets a finite, plausible one."""
+    from tactile_sl_camera.sim import Contact, Nuisances, Renderer, load_artwork
+    from tactile_sl_decoder.tooling.centre_bound import frame_point_bounds
+
+    renderer = Renderer(load_artwork())
+    rig = StereoRig(renderer.rig.left_info, renderer.rig.right_info)
+    press = [Contact("sphere", radius=0.004, depth=0.0005, x=0.0003, y=-0.0002)]
+    bounds = [frame_point_bounds(renderer, rig, press,
+                                 Nuisances(noise_sigma=sigma, shot_noise=0.0, blur_sigma=0.8),
+                                 seed=3, frame_index=0, spacing_px=18.0)
+              for sigma in (1.0, 2.0)]
+    truth = renderer.render(press, Nuisances(), seed=3).truth
+    assert len(bounds[0]) == truth.visible.sum()
+    assert np.isfinite(bounds[0]).mean() > 0.99
+    ok = np.isfinite(bounds[0])
+    assert np.allclose(bounds[1][ok] / bounds[0][ok], 4.0, rtol=1e-6)
+    rms = np.sqrt(np.median(bounds[0][ok]))
+    assert 1e-8 < rms < 1e-5        # well under a micrometre .. 10 um at 1 grey level of noise

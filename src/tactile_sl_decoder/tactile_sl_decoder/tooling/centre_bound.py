@@ -109,6 +109,48 @@ def point_error_bound(rig: Any, px_left: np.ndarray, px_right: np.ndarray,
     return total
 
 
+def frame_point_bounds(renderer: Any, rig: Any, contacts: Any, nuisances: Any, seed: int,
+                       frame_index: int, spacing_px: float) -> np.ndarray:
+    """Bound (m^2) of every visible undamaged glyph's point in one simulated stereo frame.
+
+    ``renderer``: the simulator's ``Renderer``; the frame is what ``renderer.render(contacts,
+    nuisances, seed, frame_index)`` gives, ``rig`` the decoder's ``StereoRig`` of its cameras.
+    The same scene (same seed: same exposures, dust and damage) rendered as its linear signal
+    sets the noise; a glyph's own share of it is the signal with only every third row and
+    column of glyphs printed minus the signal without any glyph (the image is linear in the
+    print), so its neighbours' ink does not count as information about its position. Nine
+    such renders cover every glyph; the window of 1.5 spacings holds its whole blurred
+    footprint and no other printed glyph. Returns the glyphs in the truth's order (visible,
+    undamaged ones).
+    """
+    def linear(ink: np.ndarray | None) -> Any:
+        return renderer.render(contacts, nuisances, seed=seed, frame_index=frame_index,
+                               ink_cells=ink, linear=True)
+
+    rows, cols = renderer.artwork.rows, renderer.artwork.cols
+    full = linear(None)
+    t = full.truth
+    keep = t.visible & ~t.damaged if t.damaged is not None else t.visible
+    blank = linear(np.zeros(rows * cols, bool))
+    cell_row, cell_col = np.divmod(np.arange(rows * cols), cols)
+    half = int(np.ceil(1.5 * spacing_px))
+    read, shot = float(nuisances.noise_sigma), float(nuisances.shot_noise)
+    covs = np.full((2, len(t.rows), 2, 2), np.inf)
+    for a in range(3):
+        for b in range(3):
+            sel = keep & (t.rows % 3 == a) & (t.cols % 3 == b)
+            if not sel.any():
+                continue
+            part = linear((cell_row % 3 == a) & (cell_col % 3 == b))
+            for side, (img, own, base, px) in enumerate((
+                    (full.left, part.left, blank.left, t.px_left),
+                    (full.right, part.right, blank.right, t.px_right))):
+                covs[side, sel] = centre_covariance_bound(img, px[sel], half, read, shot,
+                                                          glyph_signal=own - base)
+    return point_error_bound(rig, t.px_left[keep], t.px_right[keep], covs[0, keep],
+                             covs[1, keep])
+
+
 def _points(rig: Any, uv_left: np.ndarray, uv_right: np.ndarray) -> np.ndarray:
     """Triangulated (N, 3) points (the rig's reprojection errors are not needed here)."""
     return np.asarray(rig.triangulate(uv_left, uv_right)[0], np.float64)
