@@ -9,16 +9,17 @@ bound cannot be met by any per-point measurement of those images.
 
 Model (the simulator's, docs/camera.md): independent pixels, Gaussian noise of variance
 ``read_sigma**2 + shot_noise * S`` on the linear signal ``S`` (grey levels, before gamma,
-quantisation and MJPEG, which only lose information). The glyph's image is taken as a
-known pattern that moves with the centre (u, v): the whole window's gradient counts as
-information about the centre, texture and neighbours' ink included. Both choices make the
-bound optimistic, i.e. a true lower bound.
+quantisation and MJPEG, which only lose information). The glyph's own share G of the
+image (:func:`frame_point_bounds`: the print with and without it) is taken as a known
+pattern that moves with the centre (u, v), and everything else (the neighbours, the
+object seen through the pad, the light) as known too. These choices make the bound
+optimistic, i.e. a true lower bound.
 
 Fisher information of a Gaussian whose mean and variance depend on the parameters, for
 independent samples (Kay, *Fundamentals of Statistical Signal Processing: Estimation
 Theory*, 1993, eq. 3.31, diagonal covariance):
 
-    J_ab = sum_pixels  dS/da dS/db * (1 / var + shot_noise**2 / (2 var**2))
+    J_ab = sum_pixels  dG/da dG/db * (1 / var + shot_noise**2 / (2 var**2))
 
 with a, b in {u, v}; the bound on the centre's covariance is J^-1 (Kay eq. 3.24). The 3-D
 bound of a point is trace(A_L C_L A_L^T + A_R C_R A_R^T), A the Jacobian of the
