@@ -25,7 +25,8 @@ Figures, not pass/fail; the acceptance limits of issue 11 are printed next to th
 Pictures (``--pictures DIR``, default out/sweep; rows of ``--picture-rows``, default the
 combined ones): the first frame of a row, both images side by side, each true glyph
 marked as measured (green: from a glyph the extraction found; magenta: found by
-the rescue, where the extraction found none), lost (red) or damaged (grey).
+the rescue, where the extraction found none), lost (red) or damaged (grey); with
+``--bound`` also ``<row>_bound.png``, every glyph coloured by its point's bound.
 """
 from __future__ import annotations
 
@@ -248,6 +249,9 @@ class Sweep:
             self._count_labels(out, res, t, undamaged)
             if picture is not None and frame == 0:
                 write_picture(picture, f, res, self.artwork.cols)
+                if self.bound:
+                    write_bound_picture(picture.with_name(picture.stem + "_bound.png"), f,
+                                        out.bounds[-1])
         return out
 
     def _count_labels(self, out: RowFigures, res: Any, truth: Any, undamaged: np.ndarray
@@ -298,6 +302,46 @@ def write_picture(path: pathlib.Path, frame: Any, res: Any, cols: int) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.stem + ".tmp.png")
     cv2.imwrite(str(tmp), np.hstack(panels))
+    tmp.replace(path)
+
+
+def write_bound_picture(path: pathlib.Path, frame: Any, bounds_m2: np.ndarray) -> None:
+    """Both images side by side, each visible undamaged glyph coloured by its point's bound.
+
+    Colour: the Cramer-Rao bound of the 3-D error (square root, log scale 0.5-50 um, the
+    inferno map: dark = small); a grey cross where the images hold no information at all.
+    The scale bar underneath marks 0.5, 5 and 50 um and the 10 um bar of issue 11.
+    """
+    import cv2
+
+    t = frame.truth
+    keep = t.visible & ~t.damaged if t.damaged is not None else t.visible
+    err_um = 1e6 * np.sqrt(bounds_m2)
+    finite = np.isfinite(err_um)
+    level = np.zeros(len(err_um), np.uint8)
+    level[finite] = np.clip(255 * (np.log10(err_um[finite]) + 0.30103) / 2.0, 0, 255)
+    colours = cv2.applyColorMap(level.reshape(-1, 1), cv2.COLORMAP_INFERNO).reshape(-1, 3)
+    panels = []
+    for gray, px in ((frame.left, t.px_left[keep]), (frame.right, t.px_right[keep])):
+        img = cv2.cvtColor((gray // 2 + 64).astype(np.uint8), cv2.COLOR_GRAY2BGR)
+        for k, (u, v) in enumerate(np.rint(px).astype(int)):
+            if finite[k]:
+                cv2.circle(img, (int(u), int(v)), 4, tuple(int(c) for c in colours[k]), -1)
+            else:
+                cv2.drawMarker(img, (int(u), int(v)), (128, 128, 128), cv2.MARKER_TILTED_CROSS, 6)
+        panels.append(img)
+    picture = np.hstack(panels)
+    bar = np.zeros((40, picture.shape[1], 3), np.uint8)
+    ramp = np.linspace(0, 255, picture.shape[1]).astype(np.uint8).reshape(1, -1)
+    bar[:16] = cv2.applyColorMap(np.repeat(ramp, 16, axis=0), cv2.COLORMAP_INFERNO)
+    for um in (0.5, 5.0, 10.0, 50.0):
+        x = int((np.log10(um) + 0.30103) / 2.0 * (picture.shape[1] - 1))
+        cv2.line(bar, (x, 0), (x, 20), (255, 255, 255), 1)
+        cv2.putText(bar, f"{um:g} um", (min(x + 3, picture.shape[1] - 60), 34),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.stem + ".tmp.png")
+    cv2.imwrite(str(tmp), np.vstack([picture, bar]))
     tmp.replace(path)
 
 
