@@ -40,7 +40,7 @@ def test_bench_sweep_runs_a_row_writes_its_figures_and_its_picture(tmp_path):
     out = subprocess.run(
         [sys.executable, str(REPO / "tools" / "bench_sweep.py"), "--only", "jpeg",
          "--levels", "mild", "--frames", "1", "--no-write", "--json", str(tmp_path / "f.json"),
-         "--pictures", str(tmp_path), "--picture-rows", "jpeg"],
+         "--pictures", str(tmp_path), "--picture-rows", "jpeg", "--bound"],
         capture_output=True, text=True, timeout=300, env=ros_env(next_domain_id()))
     assert out.returncode == 0, out.stderr[-3000:]
     assert "| jpeg | mild |" in out.stdout
@@ -52,3 +52,7 @@ def test_bench_sweep_runs_a_row_writes_its_figures_and_its_picture(tmp_path):
     # green marks (measured glyphs) on both halves
     green = (img[:, :, 1] == 200) & (img[:, :, 0] == 0) & (img[:, :, 2] == 0)
     assert green[:, :640].sum() > 1000 and green[:, 640:].sum() > 1000
+    # --bound: the Cramer-Rao bound, below what the decoder reaches, its column and picture
+    assert "| CRLB, best 97 % |" in out.stdout
+    assert 0 < row["bound_best_m"] <= row["bound_all_m"] < row["rmse_m"]
+    assert cv2.imread(str(tmp_path / "jpeg_mild_bound.png")).shape == (520, 1280, 3)
