@@ -48,6 +48,9 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument("stages", default_value="false",
                               description="true/false (any ROS boolean spelling): chain the "
                               "extraction/classification stage nodes"),
+        DeclareLaunchArgument("stage_max_rate", default_value="0.0",
+                              description="stages:=true: frames per second the stage chain "
+                              "takes at most, the same frames from both cameras (0: all)"),
         DeclareLaunchArgument("mirrored", default_value="false",
                               description="the cameras see the artwork mirrored"),
         DeclareLaunchArgument("rviz", default_value="false",
@@ -72,7 +75,8 @@ def generate_launch_description() -> LaunchDescription:
         IncludeLaunchDescription(
             PythonLaunchDescriptionSource(
                 os.path.join(decoder_share, "launch", "symbols.launch.py")),
-            launch_arguments={"namespace": ns}.items(),
+            launch_arguments={"namespace": ns,
+                              "max_rate": LaunchConfiguration("stage_max_rate")}.items(),
             condition=IfCondition(stages)),
         Node(
             package="tactile_sl_decoder", executable="decoder", name="decoder", namespace=ns,

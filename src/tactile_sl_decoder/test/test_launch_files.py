@@ -29,3 +29,12 @@ def test_sensor_launch_passes_restamp_and_reads_stages_as_a_boolean():
     text = (REPO / "src/tactile_sl_decoder/launch/tactile_sl.launch.py").read_text()
     assert '"restamp": LaunchConfiguration("restamp")' in text
     assert "== 'true'" not in text and ".lower() in ('true', '1')" in text
+
+
+def test_stage_launch_passes_max_rate_as_a_double():
+    """ros2 launch would pass max_rate:=20 as an integer, which a double parameter refuses."""
+    symbols = (REPO / "src/tactile_sl_decoder/launch/symbols.launch.py").read_text()
+    assert 'ParameterValue(LaunchConfiguration("max_rate"), value_type=float)' in symbols
+    assert '{"max_rate": max_rate}' in symbols
+    sensor = (REPO / "src/tactile_sl_decoder/launch/tactile_sl.launch.py").read_text()
+    assert '"max_rate": LaunchConfiguration("stage_max_rate")' in sensor
