@@ -100,6 +100,11 @@ class SyncEvent:
     reset: bool = False            # time jumped back by more than max_age: state cleared
 
 
+def stamp_ns(header: Any) -> int:
+    """A message header's stamp as integer nanoseconds (exact), as the syncs below take it."""
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
 class StereoSync:
     """Pairs left/right messages by header stamp: exact stamps first, then within a slop.
 

@@ -38,7 +38,7 @@ from tactile_sl_camera.nodes.parameters import (
 )
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.checks import check_classifier, check_threshold, load_pattern_spec
-from tactile_sl_decoder.frames import StereoSync
+from tactile_sl_decoder.frames import StereoSync, stamp_ns
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.nodes.diagnostics import DecoderDiagnostics, DiagnosticLimits, Status
 from tactile_sl_decoder.nodes.diagnostics_publisher import DiagnosticsPublisher
@@ -51,11 +51,6 @@ try:
     from tactile_sl_msgs.msg import SymbolArray
 except ImportError:  # pragma: no cover - interfaces not built
     SymbolArray = None
-
-
-def stamp_ns(header: Any) -> int:
-    """Header stamp as integer nanoseconds (exact)."""
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
 class DecoderNode(Node):

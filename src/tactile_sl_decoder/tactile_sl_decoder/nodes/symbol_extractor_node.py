@@ -25,7 +25,7 @@ from tactile_sl_camera.images import ImageFormatError, to_gray
 from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_decoder.extract.extraction import extract_symbols
-from tactile_sl_decoder.frames import StampThrottle
+from tactile_sl_decoder.frames import StampThrottle, stamp_ns
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
 from tactile_sl_decoder.symbol_array import fill_message
@@ -66,8 +66,7 @@ class SymbolExtractorNode(Node):
 
     def on_image(self, msg: Image) -> None:
         """Extract and publish; bad input is logged and skipped."""
-        stamp = msg.header.stamp
-        if not self.throttle.accept(int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)):
+        if not self.throttle.accept(stamp_ns(msg.header)):
             self.throttled += 1
             return
         try:
