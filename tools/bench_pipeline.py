@@ -116,13 +116,6 @@ def _pipeline(args: argparse.Namespace, carry: bool = True):
     return StereoPipeline(PatternSpec.load(args.pattern), None, params)
 
 
-def _set_threads(n: int) -> None:
-    """Intra-op threads of OpenCV and OpenBLAS (0 = leave their defaults)."""
-    from tactile_sl_decoder.cpu_threads import set_cpu_threads
-
-    set_cpu_threads(n)
-
-
 class Floor:
     """The unavoidable work of one stereo pair, timed on the same frames as the pipeline.
 
@@ -204,10 +197,11 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
     carried labels alternate pass by pass, so their figures come from the same sitting.
     """
     from tactile_sl_camera.images import to_gray
+    from tactile_sl_decoder.cpu_threads import set_cpu_threads
     from tactile_sl_decoder.frames import bag_frames
     from tactile_sl_decoder.tooling.e2e_metrics import aggregate, format_table, frame_metrics
 
-    _set_threads(args.cpu_threads)
+    set_cpu_threads(args.cpu_threads)   # OpenCV and OpenBLAS, as the pipeline does
     modes = ["on", "off"] if args.carry == "both" else [args.carry]
     pipes = {m: _pipeline(args, carry=m == "on") for m in modes}
     first = pipes[modes[0]]
@@ -345,9 +339,10 @@ def _touch_stage(pipe):
 
 def flips(args: argparse.Namespace) -> int:
     """Coverage and wrong cells with and without random label flips."""
+    from tactile_sl_decoder.cpu_threads import set_cpu_threads
     from tactile_sl_decoder.tooling.bag_runs import evaluate_bag, flip_labels_hook
 
-    _set_threads(args.cpu_threads)
+    set_cpu_threads(args.cpu_threads)   # OpenCV and OpenBLAS, as the pipeline does
     pipe = _pipeline(args)
     print(f"label-flip robustness: {100 * args.flip:.1f} % of known labels flipped after "
           f"classification (seed {args.seed})")

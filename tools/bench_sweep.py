@@ -219,11 +219,12 @@ class Sweep:
                                       "vignetting": 0.2, **doc})
             renderer = self.renderer(spacing)
             seed = self.seed + 101 * level + frame
-            f = renderer.render(frame_contacts(frame), nz, seed=seed, frame_index=frame)
+            contacts = frame_contacts(frame)
+            f = renderer.render(contacts, nz, seed=seed, frame_index=frame)
             rig = StereoRig(renderer.rig.left_info, renderer.rig.right_info)
             if self.bound:
-                out.bounds.append(frame_point_bounds(renderer, rig, frame_contacts(frame), nz,
-                                                     seed, frame, spacing))
+                out.bounds.append(frame_point_bounds(renderer, rig, contacts, nz, seed, frame,
+                                                     spacing))
             self.pipeline.forget_frames()    # each frame is a scene of its own, not a stream
             t0 = time.perf_counter()
             res = self.pipeline.process(f.left, f.right, rig, rig)
@@ -251,7 +252,7 @@ class Sweep:
                 write_picture(picture, f, res, self.artwork.cols)
                 if self.bound:
                     write_bound_picture(picture.with_name(picture.stem + "_bound.png"), f,
-                                        out.bounds[-1])
+                                        undamaged, out.bounds[-1])
         return out
 
     def _count_labels(self, out: RowFigures, res: Any, truth: Any, undamaged: np.ndarray
@@ -305,8 +306,11 @@ def write_picture(path: pathlib.Path, frame: Any, res: Any, cols: int) -> None:
     tmp.replace(path)
 
 
-def write_bound_picture(path: pathlib.Path, frame: Any, bounds_m2: np.ndarray) -> None:
+def write_bound_picture(path: pathlib.Path, frame: Any, undamaged: np.ndarray,
+                        bounds_m2: np.ndarray) -> None:
     """Both images side by side, each visible undamaged glyph coloured by its point's bound.
+
+    ``undamaged``: the truth's visible undamaged glyphs, the order of ``bounds_m2``.
 
     Colour: the Cramer-Rao bound of the 3-D error (square root, log scale 0.5-50 um, the
     inferno map: dark = small); a grey cross where the images hold no information at all.
@@ -315,14 +319,13 @@ def write_bound_picture(path: pathlib.Path, frame: Any, bounds_m2: np.ndarray) -
     import cv2
 
     t = frame.truth
-    keep = t.visible & ~t.damaged if t.damaged is not None else t.visible
     err_um = 1e6 * np.sqrt(bounds_m2)
     finite = np.isfinite(err_um)
     level = np.zeros(len(err_um), np.uint8)
     level[finite] = np.clip(255 * (np.log10(err_um[finite]) + 0.30103) / 2.0, 0, 255)
     colours = cv2.applyColorMap(level.reshape(-1, 1), cv2.COLORMAP_INFERNO).reshape(-1, 3)
     panels = []
-    for gray, px in ((frame.left, t.px_left[keep]), (frame.right, t.px_right[keep])):
+    for gray, px in ((frame.left, t.px_left[undamaged]), (frame.right, t.px_right[undamaged])):
         img = cv2.cvtColor((gray // 2 + 64).astype(np.uint8), cv2.COLOR_GRAY2BGR)
         for k, (u, v) in enumerate(np.rint(px).astype(int)):
             if finite[k]:
@@ -391,7 +394,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-write", action="store_true", help="do not update docs/robustness.md")
     ap.add_argument("--bound", action="store_true",
                     help="also the Cramer-Rao bound of each row's 3-D RMSE over the best 97 %% "
-                         "of its glyphs (renders every frame a second time, without noise)")
+                         "of its glyphs (renders every frame 11 more times: its signal before "
+                         "noise, without glyphs and with every third row and column of them)")
     ap.add_argument("--json", default=None, help="also write the figures as JSON")
     ap.add_argument("--pictures", type=pathlib.Path, default=REPO / "out" / "sweep",
                     help="folder of the rows' pictures (default out/sweep)")
