@@ -38,14 +38,18 @@ def test_chained_stage_nodes_equal_offline_replay(tmp_path, domain_id, repo):
     procs = []
     try:
         for side in ("left", "right"):
+            # every hop reliable (the inputs default to best effort, as for camera drivers): a
+            # best-effort subscriber that has not finished matching a new publisher on its side
+            # drops what arrives, and this test needs every frame
             procs.append(start_node("tactile_sl_decoder", "symbol_extractor", domain_id,
-                                    ["-r", f"__ns:=/tactile/{side}", "-r", "image:=image_raw"],
+                                    ["-r", f"__ns:=/tactile/{side}", "-r", "image:=image_raw",
+                                     "-p", "qos.input.reliability:=reliable"],
                                     tmp_path / f"extractor_{side}.log"))
             procs.append(start_node("tactile_sl_decoder", "symbol_classifier", domain_id,
                                     ["-r", f"__ns:=/tactile/{side}"],
                                     tmp_path / f"classifier_{side}.log"))
         procs.append(start_node("tactile_sl_decoder", "decoder", domain_id, [
-            "-r", "__ns:=/tactile", "-p", "input:=symbols",
+            "-r", "__ns:=/tactile", "-p", "input:=symbols", "-p", "qos.input.reliability:=reliable",
             "-r", "left/symbols:=left/labelled_symbols",
             "-r", "right/symbols:=right/labelled_symbols"], tmp_path / "decoder.log"))
         # Play only once every hop of the chain has its publisher and subscriber (messages

@@ -88,6 +88,11 @@ class ReplayNode(Node):
             "subscribers.", (0, 1000), **ro))
         self.subscribers_timeout = float(live.declare("wait_for_subscribers_timeout", 10.0,
             "Seconds to wait for subscribers before playing anyway.", (0.0, 3600.0), **ro))
+        self.subscribers_settle = float(live.declare("wait_for_subscribers_settle", 0.5,
+            "Seconds to wait after the subscribers are there, before the first message: the "
+            "count is this node's side of each match, and a subscriber that has not yet "
+            "matched this publisher on its side drops what arrives (best effort).",
+            (0.0, 60.0), **ro))
         pace_topic = str(live.declare("wait_for_topic", "",
             "Pacing: after each stereo frame, wait for a message on this topic carrying the "
             "frame's header stamp (e.g. 'points'), so playback never outruns the consumer.",
@@ -169,6 +174,7 @@ class ReplayNode(Node):
         while self._running() and time.monotonic() < deadline:
             if all(pub.get_subscription_count() >= self.min_subscribers
                    for pub in self.publishers_by_topic.values()):
+                self._stopping.wait(self.subscribers_settle)
                 return
             self._stopping.wait(0.02)
         if not self._running():
