@@ -23,7 +23,21 @@ REPO = pathlib.Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
 
 # Domain ids 0..101 are safe on Linux; spread tests across them, away from env.sh's default 42.
-_domains = itertools.cycle(range(60 + os.getpid() % 20, 101))
+# TACTILE_SL_TEST_DOMAINS=LO-HI confines a test session to its own range (several checkouts
+# testing side by side on one machine must not discover each other's nodes).
+
+
+def _domain_range() -> range:
+    spec = os.environ.get("TACTILE_SL_TEST_DOMAINS", "")
+    if spec:
+        lo, hi = (int(x) for x in spec.split("-"))
+        if not 0 <= lo <= hi <= 101:
+            raise ValueError(f"TACTILE_SL_TEST_DOMAINS={spec!r}: need LO-HI within 0-101")
+        return range(lo, hi + 1)
+    return range(60 + os.getpid() % 20, 101)
+
+
+_domains = itertools.cycle(_domain_range())
 
 
 def next_domain_id() -> int:
