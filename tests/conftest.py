@@ -65,10 +65,14 @@ class DecoderGraph:
 
     probe: Probe
     start: Callable[..., RunningNode]
+    domain_id: int
 
     @property
     def node(self):
         return self.probe.node
+
+    def spin_until(self, predicate: Callable[[], object], timeout: float) -> bool:
+        return self.probe.spin_until(predicate, timeout)
 
     def spin(self, seconds: float) -> None:
         self.probe.spin(seconds)
@@ -91,4 +95,4 @@ def ros(tmp_path: pathlib.Path, domain_id: int) -> Iterator[DecoderGraph]:
             return decoders.enter_context(running_node(
                 "tactile_sl_decoder", "decoder", domain_id,
                 ["-r", "__ns:=/tactile", "-p", "warn_period:=0.0", *ros_args], log))
-        yield DecoderGraph(probe, start)
+        yield DecoderGraph(probe, start, domain_id)

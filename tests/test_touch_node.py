@@ -16,12 +16,12 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 TOUCH_TOPICS = ("field", "wrench", "contact", "depth")
 
 
-def _offline(tmp_path):
+def _offline(tmp_path, bag=BAG):
     from tactile_sl_camera.bag_io import BagReader
     from tactile_sl_decoder.cli import main as cli_main
 
     out = tmp_path / "out.mcap"
-    assert cli_main(["replay", str(BAG), "-o", str(out), "--no-progress"]) == 0
+    assert cli_main(["replay", str(bag), "-o", str(out), "--no-progress"]) == 0
     offline: dict[str, dict] = {t: {} for t in TOUCH_TOPICS}
     reader = BagReader(out)
     for raw in reader.raw_messages([f"/tactile/{t}" for t in TOUCH_TOPICS]):
@@ -93,3 +93,48 @@ def test_bad_sensor_file_is_one_fatal_line(ros, tmp_path):
     text = proc.log()
     assert code == 1 and "FATAL" in text and "youngs_modulus" in text, text
     assert "Traceback" not in text
+
+
+def test_every_frame_after_the_reference_gets_touch_outputs_paced_as_the_demo(ros, tmp_path):
+    """`make demo`'s pacing: all frames pass while the reference is still being prepared.
+
+    The replay sends each frame as soon as the last one's cloud is out, so touch_halfspace's
+    five frames are through the decoder within a fraction of the reference's preparation;
+    each frame after the reference must still get its wrench (queued, then published with
+    its own stamp), equal to the offline replay's.
+    """
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import PointCloud2
+
+    from ros_harness import BAGS, running_node
+
+    bag = BAGS / "touch_halfspace.mcap"
+    offline = _offline(tmp_path, bag)["wrench"]
+    qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+    clouds: dict[int, object] = {}
+    wrenches: dict[int, object] = {}
+
+    def stamp(msg):
+        return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+
+    ros.node.create_subscription(PointCloud2, "/tactile/points",
+                                 lambda m: clouds.__setitem__(stamp(m), m), qos)
+    ros.node.create_subscription(WrenchStamped, "/tactile/wrench",
+                                 lambda m: wrenches.__setitem__(stamp(m), m), qos)
+    proc = ros.start()
+    assert ros.spin_until(lambda: ros.node.count_publishers("/tactile/points") > 0, 30.0)
+    with running_node("tactile_sl_camera", "replay", ros.domain_id, [
+            "-r", "__ns:=/tactile", "-p", f"bag:={bag}", "-p", "rate:=0.0",
+            "-p", "reliability:=reliable", "-p", "depth:=5",
+            "-p", "wait_for_subscribers:=1", "-p", "wait_for_subscribers_timeout:=60.0",
+            "-p", "wait_for_topic:=points", "-p", "wait_timeout:=5.0"],
+            tmp_path / "replay.log") as replay:
+        assert ros.spin_until(lambda: replay.process.poll() is not None, 120.0), replay.log()
+    assert len(clouds) == len(offline) + 1, (sorted(clouds), proc.lines()[-5:])
+    after_reference = sorted(clouds)[1:]
+    assert ros.spin_until(lambda: set(after_reference) <= set(wrenches), 60.0), proc.log()
+    assert sorted(wrenches) == after_reference
+    for s, msg in wrenches.items():
+        assert msg == deserialize_message(offline[s], WrenchStamped), s

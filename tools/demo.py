@@ -95,6 +95,11 @@ class Listener:
     def _on_symbols(self, msg: SymbolArray) -> None:
         self.symbols[stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)] = msg
 
+    def touch_complete(self, reference_frames: int = 1) -> bool:
+        """Every decoded frame after the reference has all four touch outputs."""
+        stamps = sorted(s for s, (_, msg) in self.clouds.items() if msg.width)
+        return all(set(stamps[reference_frames:]) <= set(got) for got in self.touch.values())
+
     def spin(self, seconds: float = 0.05) -> None:
         self.executor.spin_once(timeout_sec=seconds)
 
@@ -154,7 +159,12 @@ def main() -> int:
         deadline = time.monotonic() + 180
         while replay.poll() is None and time.monotonic() < deadline:
             listener.spin()
-        for _ in range(20):
+        # Every frame after the reference gets touch outputs, those that came while the
+        # reference was being prepared (about a second after the first frame) a little later.
+        deadline = time.monotonic() + 60
+        while not listener.touch_complete() and time.monotonic() < deadline:
+            listener.spin()
+        for _ in range(5):
             listener.spin()
     finally:
         code = stop(replay) if replay is not None else 1
@@ -175,6 +185,9 @@ def main() -> int:
     print(f"\nclouds received: {len(listener.clouds)} of {len(frames)} stereo frames; "
           f"touch outputs for {len(listener.touch['wrench'])} (the first frame is the "
           "untouched reference)")
+    if not listener.touch_complete():
+        print("demo: some frames after the reference got no touch outputs; see "
+              f"{args.out / 'decoder.log'}")
     if not metrics:
         print(f"demo: no point cloud came out; see {args.out / 'decoder.log'}")
         return 1

@@ -129,3 +129,87 @@ def test_a_tare_drops_a_reference_still_being_prepared():
     assert ok and not live.preparing and not live.ready
     old.done.wait(60)
     assert not live.poll() and not live.ready     # the dropped one is never installed
+
+
+def _same(got, want):
+    assert np.array_equal(got.force, want.force)
+    assert np.array_equal(got.depth, want.depth, equal_nan=True)
+    for name in ("displacement", "wrench_force", "wrench_moment"):
+        assert np.array_equal(getattr(got, name), getattr(want, name)), name
+    assert got.contact == want.contact
+
+
+def test_frames_during_a_background_preparation_get_their_outputs_in_order():
+    """Frames that come while the reference is prepared are queued, then given outputs."""
+    sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
+    inline = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1))
+    live = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1),
+                      background=True)
+    rng = np.random.default_rng(5)
+    rest = _points(_displacement(sensor.elastomer, [], 2e-6, rng))
+    inline.update(rest)
+    live.update(rest)
+    gate = live._preparing
+    frames = [_points(_displacement(sensor.elastomer, [(0.0, 0.0, -f, 2e-3, 0.0, 0.0)],
+                                    2e-6, rng)) for f in (0.1, 0.4, 0.8)]
+    if gate.done.is_set():           # a very fast machine: the queue is not exercised
+        pytest.skip("the preparation finished before the next frame")
+    for i, pts in enumerate(frames[:2]):
+        assert live.update(pts, tag=i) is None
+    assert live.pending == 2 and live.drain() == []
+    gate.done.wait(60)
+    want = [inline.update(p) for p in frames]
+    got = live.update(frames[2], tag=2)     # installs the reference, catches up, then this
+    caught = live.drain()
+    assert [tag for tag, _ in caught] == [0, 1] and live.pending == 0
+    for (_, r), w in zip(caught, want[:2]):
+        _same(r, w)
+    _same(got, want[2])
+    assert live.pending_dropped == 0 and live.drain() == []
+
+
+def test_the_pending_queue_is_bounded_and_cleared_by_a_tare():
+    sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
+    live = TouchStage(sensor, SHAPE, PITCH,
+                      params=TouchParams(reference_frames=1, max_pending_frames=2),
+                      background=True)
+    rng = np.random.default_rng(6)
+    live.update(_points(_displacement(sensor.elastomer, [], 2e-6, rng)))
+    gate = live._preparing
+    pts = _points(_displacement(sensor.elastomer, [], 2e-6, rng))
+    for i in range(4):
+        live._queue(i, pts)             # as update() does while the preparation runs
+    assert live.pending == 2 and live.pending_dropped == 2
+    assert [tag for tag, _ in live._pending] == [2, 3]   # the newest are kept
+    ok, _ = live.tare()
+    assert ok and live.pending == 0
+    gate.done.wait(60)
+    assert not live.poll() and live.drain() == []
+    with pytest.raises(ValueError, match="max_pending_frames"):
+        TouchParams(max_pending_frames=-1).validate()
+
+
+def test_a_tare_with_the_same_cells_reuses_the_inversion():
+    """A new reference of the same cells is ready at once, with the same outputs."""
+    sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
+    live = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1),
+                      background=True)
+    rng = np.random.default_rng(7)
+    live.update(_points(_displacement(sensor.elastomer, [], 2e-6, rng)))
+    live._preparing.done.wait(60)
+    live.poll()
+    solver = live.solver
+    assert live.tare()[0]
+    rest = _points(_displacement(sensor.elastomer, [], 2e-6, rng))
+    assert live.update(rest) is None
+    assert live.ready and not live.preparing and live.solver is solver   # no queue at all
+    fresh = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1))
+    fresh.update(rest)
+    pressed = _points(_displacement(sensor.elastomer, [(0.0, 0.0, -0.5, 2e-3, 0.0, 0.0)],
+                                    2e-6, rng))
+    _same(live.update(pressed), fresh.update(pressed))
+    # other cells: a new inversion, prepared in the background again
+    live.update(rest)                   # released first: a tare is refused while pressed
+    assert live.tare()[0]
+    assert live.update(_points(_displacement(sensor.elastomer, [], 2e-6, rng), drop=[3])) is None
+    assert live.preparing

@@ -474,7 +474,8 @@ class DecoderNode(Node):
                 len(ref.cells) if ref is not None else 0,
                 pose.residual_rms if pose is not None else float("nan"),
                 pose.residual_max if pose is not None else float("nan"),
-                t.tares, t.last_tare, t.stage.preparing)
+                t.tares, t.last_tare, t.stage.preparing, t.stage.pending,
+                t.stage.pending_dropped)
         else:
             self.diag.touch_state(False)
         return self.diag.statuses(time.monotonic())

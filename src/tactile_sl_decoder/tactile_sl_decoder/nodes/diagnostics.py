@@ -192,16 +192,23 @@ class DecoderDiagnostics:
     def touch_state(self, enabled: bool, ready: bool = False, frames_needed: int = 1,
                     cells: int = 0, residual_rms_m: float = float("nan"),
                     residual_max_m: float = float("nan"), tares: int = 0,
-                    last_tare: str = "", preparing: bool = False) -> None:
-        """The touch reference and tare state, as the touch outputs see it now."""
+                    last_tare: str = "", preparing: bool = False, pending: int = 0,
+                    pending_dropped: int = 0) -> None:
+        """The touch reference and tare state, as the touch outputs see it now.
+
+        ``pending``: frames waiting for the reference being prepared (their outputs follow);
+        ``pending_dropped``: frames that found that queue full (no touch outputs).
+        """
         values = {"enabled": _fmt(enabled), "reference": _fmt(ready), "tares": _fmt(tares),
-                  "last_tare": last_tare or "none", "preparing": _fmt(preparing)}
+                  "last_tare": last_tare or "none", "preparing": _fmt(preparing),
+                  "frames_waiting": _fmt(pending), "frames_without_touch": _fmt(pending_dropped)}
         if not enabled:
             self.touch = Status("touch reference", OK, "touch outputs off", values)
             return
         if not ready and preparing:
             self.touch = Status("touch reference", WARN, "preparing the reference (pad pose, "
-                                "inversion) in the background; touch outputs follow", values)
+                                f"inversion) in the background; {pending} frame(s) wait for "
+                                "their touch outputs", values)
             return
         if not ready:
             self.touch = Status("touch reference", WARN,

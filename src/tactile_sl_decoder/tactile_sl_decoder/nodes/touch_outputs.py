@@ -132,6 +132,12 @@ class TouchOutputs:
             "tare_max_depth", defaults.tare_max_depth, "m: a tare is refused while the pad is "
             "pressed in deeper than this (or in contact)", (1e-7, 0.01),
             apply=lambda v: self._set("tare_max_depth", v))
+        max_pending = live.declare(
+            "max_pending_frames", defaults.max_pending_frames, "Frames kept while a new "
+            "reference is prepared in the background (about 1-2 s at start, or after a tare "
+            "that changes the reference's cells); they get their touch outputs, late, once it "
+            "is ready. Beyond this many the oldest are dropped (counted in diagnostics).",
+            (0, 100000), read_only=True)
         live.check_together(_hysteresis)
         self.enabled = bool(enabled)
         self.announced_waiting = False
@@ -149,6 +155,7 @@ class TouchOutputs:
         params.contact.force_on = float(force_on)
         params.contact.force_off = float(force_off)
         params.tare_max_depth = float(tare_max_depth)
+        params.max_pending_frames = int(max_pending)
         # the reference is prepared in a worker thread: images keep flowing meanwhile
         self.stage = TouchStage(sensor, shape, pitch, mirrored, params, background=True)
         self.frame_id = str(getattr(node, "frame_prefix", "")) + sensor.pad_frame
@@ -209,6 +216,12 @@ class TouchOutputs:
                 self._announce_reference(*self._reference_frame)
         except ReferenceError as exc:
             self._unusable(exc)
+        self._publish_caught_up()
+
+    def _publish_caught_up(self) -> None:
+        """Outputs of the frames that waited for the reference (in their order)."""
+        for stamp, result in self.stage.drain():
+            self._publish(result, stamp)
 
     def _unusable(self, exc: ReferenceError) -> None:
         self.node.get_logger().warning(f"touch: reference not usable ({exc}); trying again "
@@ -226,7 +239,7 @@ class TouchOutputs:
                 f"touch: no outputs until the reference is taken from "
                 f"{self.stage.params.reference_frames} decoded frame(s) of the untouched pad")
         try:
-            result = self.stage.update(points)
+            result = self.stage.update(points, tag=stamp)
         except ReferenceError as exc:
             self._unusable(exc)
             return
@@ -235,10 +248,13 @@ class TouchOutputs:
             self._reference_frame = (stamp, camera_frame)    # this frame completed it
         if self.stage.ready and not had_reference:
             self._announce_reference(*self._reference_frame)
-        if result is None:
-            return
+        self._publish_caught_up()
+        if result is not None:
+            self._publish(result, stamp)
+
+    def _publish(self, result: Any, stamp: tuple[int, int]) -> None:
+        """One frame's touch outputs, each built only while something subscribes to it."""
         f = self.frame_id
-        # each message is built only when something subscribes to it (a recorder does)
         if self.pub_field.get_subscription_count():
             self.pub_field.publish(cloud_msg(field_fields(result, stamp, f)))
         if self.pub_wrench.get_subscription_count():

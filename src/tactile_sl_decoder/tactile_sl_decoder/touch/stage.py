@@ -8,17 +8,22 @@ must be untouched); :meth:`TouchStage.tare` starts a new one, refused while the 
 visibly touched.  Until a reference exists :meth:`TouchStage.update` returns None.
 
 Preparing a reference (pad pose, the elastic inversion pre-factorised for its cells, the
-area threshold) takes ~1 s for 700 cells on 2 cores.  Offline it runs in line, so every
-frame after the reference frames has outputs; a live node passes ``background=True``: the
-preparation runs in a worker thread (LAPACK releases the GIL) while frames keep flowing,
-and touch outputs start with the first frame after it is done, instead of the camera
-stream stalling for a second at start and at every tare.
+area threshold) takes ~1-2 s for 700-840 cells on one core.  Offline it runs in line, so
+every frame after the reference frames has outputs; a live node passes ``background=True``:
+the preparation runs in a worker thread (LAPACK releases the GIL) while frames keep flowing,
+instead of the camera stream stalling for a second at start.  Frames that arrive meanwhile
+wait in a bounded queue (``TouchParams.max_pending_frames``) and get their outputs, in
+order, as soon as the reference is ready (:meth:`TouchStage.drain`): no decoded frame after
+the reference frames goes without touch outputs, it only comes late.  A tare whose new
+reference holds the same cells as the last one reuses the last inversion (it depends on the
+cells only, not on where they are), so it is ready at the frame that completes it.
 """
 from __future__ import annotations
 
 import dataclasses
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -50,6 +55,8 @@ class TouchParams:
     contact: ContactParams = field(default_factory=ContactParams)
     tare_max_depth: float = 5e-5   # m: a tare is refused above this indentation ...
                                    # ... or while in_contact
+    max_pending_frames: int = 300  # frames kept while a reference is prepared in the
+                                   # background (then the oldest are dropped): ~5-10 s
 
     def validate(self) -> "TouchParams":
         """Raise ValueError for values outside their ranges."""
@@ -58,6 +65,9 @@ class TouchParams:
                              f"{self.reference_frames}")
         if self.tare_max_depth <= 0:
             raise ValueError(f"tare_max_depth must be > 0, got {self.tare_max_depth}")
+        if not 0 <= self.max_pending_frames <= 100000:
+            raise ValueError(f"max_pending_frames must be in 0..100000, got "
+                             f"{self.max_pending_frames}")
         self.traction.validate()
         self.contact.validate()
         return self
@@ -138,10 +148,16 @@ class TouchStage:
         self._builder = ReferenceBuilder(self.params.reference_frames, self.shape)
         self.background = bool(background)
         self._preparing: _Preparation | None = None
+        # frames (tag, points) that came while the reference was prepared in the background,
+        # and their outputs once it is ready, until drain() hands them out
+        self._pending: deque[tuple[Any, np.ndarray]] = deque()
+        self._caught_up: list[tuple[Any, TouchResult]] = []
+        self.pending_dropped = 0       # queued frames dropped: the queue was full
         self._in_contact = False
         self._last: TouchResult | None = None
         self.last_solve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._index = np.full(self.shape[0] * self.shape[1], -1, np.int64)
+        self._last_solver: TractionSolver | None = None
         all_rows, all_cols = np.divmod(np.arange(self.shape[0] * self.shape[1]), self.shape[1])
         # rest position of every cell: the reference's where it has one, else the nominal
         self._rest_table = nominal_positions(all_rows, all_cols, self.shape, self.pitch,
@@ -163,8 +179,11 @@ class TouchStage:
                            f"{last.contact.normal_force * 1e3:.1f} mN, indentation "
                            f"{last.contact.max_depth * 1e6:.0f} um); release it and tare again")
         self._builder = ReferenceBuilder(self.params.reference_frames, self.shape)
-        self._preparing = None         # a preparation still running is dropped
+        self._preparing = None         # a preparation still running is dropped ...
+        self._pending.clear()          # ... with the frames that waited for it
         self.reference = None
+        if self.solver is not None:    # kept for a new reference of the same cells
+            self._last_solver = self.solver
         self.solver = None
         self._last = None
         self._in_contact = False
@@ -185,19 +204,59 @@ class TouchStage:
         if self._preparing is None or not self._preparing.done.is_set():
             return False
         preparing, self._preparing = self._preparing, None
-        self._set_reference(preparing.take())
+        try:
+            self._set_reference(preparing.take())
+        except BaseException:
+            self._pending.clear()          # their reference is unusable: nothing to give
+            raise
+        self._catch_up()
         return True
 
-    def _prepare_reference(self, cells: np.ndarray, mean: np.ndarray, frames: int
-                           ) -> tuple[Any, ...]:
-        """The costly part of a new reference, touching no state of the stage."""
+    def _catch_up(self) -> None:
+        """Outputs of the frames that waited for the reference, in their order (drain())."""
+        while self._pending:
+            tag, points = self._pending.popleft()
+            result = self._outputs(points)
+            if result is not None:
+                self._caught_up.append((tag, result))
+
+    def drain(self) -> list[tuple[Any, TouchResult]]:
+        """(tag, outputs) of frames that waited for a reference prepared in the background.
+
+        Filled when the reference is installed (:meth:`poll`, also called by
+        :meth:`update`); a caller publishes these before the outputs of the frame it passed
+        to :meth:`update`, which keeps the frames in order.
+        """
+        out, self._caught_up = self._caught_up, []
+        return out
+
+    @property
+    def pending(self) -> int:
+        """Frames waiting for the reference being prepared."""
+        return len(self._pending)
+
+    def _prepare_reference(self, cells: np.ndarray, mean: np.ndarray, frames: int,
+                           solver: TractionSolver | None = None) -> tuple[Any, ...]:
+        """The costly part of a new reference, touching no state of the stage.
+
+        ``solver``: an inversion already made for exactly these cells (reused as it is).
+        """
         rows, cols = cells // self.shape[1], cells % self.shape[1]
         nominal = nominal_positions(rows, cols, self.shape, self.pitch, self.mirrored)
         pose = fit_pad_pose(nominal, mean)
         rest = pose.to_pad(mean)
-        solver = TractionSolver(self.sensor.elastomer, self.pitch, self.shape, cells,
-                                self.params.traction, self.mirrored)
+        if solver is None:
+            solver = TractionSolver(self.sensor.elastomer, self.pitch, self.shape, cells,
+                                    self.params.traction, self.mirrored)
         return cells, rest, pose, frames, nominal, solver
+
+    def _reusable_solver(self, cells: np.ndarray) -> TractionSolver | None:
+        """The last reference's inversion if it was made for these very cells."""
+        last = self._last_solver
+        if last is None or not np.array_equal(last.cells, cells) or (
+                last.params != self.params.traction):
+            return None
+        return last
 
     def _set_reference(self, prepared: tuple[Any, ...]) -> None:
         cells, rest, pose, frames, nominal, solver = prepared
@@ -214,26 +273,50 @@ class TouchStage:
 
     # ------------------------------------------------------------------ frames
 
-    def update(self, points: np.ndarray) -> TouchResult | None:
-        """Touch outputs of one frame's contract points (None while building a reference)."""
+    def update(self, points: np.ndarray, tag: Any = None) -> TouchResult | None:
+        """Touch outputs of one frame's contract points (None while building a reference).
+
+        While a reference is prepared in the background the frame is queued with its
+        ``tag`` (e.g. its stamp) and None returned; its outputs come from :meth:`drain`.
+        """
+        if len(points) == 0:
+            return None
+        if self.reference is None and self._preparing is not None:
+            if not self.poll():
+                self._queue(tag, points)         # outputs once the reference is ready
+                return None
+        elif self.reference is None:
+            rows = points["row"].astype(np.int64)
+            cols = points["col"].astype(np.int64)
+            xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64)
+            if self._builder.add(rows, cols, xyz):
+                cells, mean = self._builder.result()
+                frames = self._builder.collected
+                solver = self._reusable_solver(cells)
+                if self.background and solver is None:
+                    self._preparing = _Preparation(
+                        lambda: self._prepare_reference(cells, mean, frames))
+                else:
+                    self._set_reference(self._prepare_reference(cells, mean, frames, solver))
+            return None
+        return self._outputs(points)
+
+    def _queue(self, tag: Any, points: np.ndarray) -> None:
+        if self.params.max_pending_frames <= 0:
+            self.pending_dropped += 1
+            return
+        while len(self._pending) >= self.params.max_pending_frames:
+            self._pending.popleft()
+            self.pending_dropped += 1
+        self._pending.append((tag, points))
+
+    def _outputs(self, points: np.ndarray) -> TouchResult | None:
+        """Touch outputs of one frame against the installed reference."""
         if len(points) == 0:
             return None
         rows = points["row"].astype(np.int64)
         cols = points["col"].astype(np.int64)
         xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64)
-        if self.reference is None and self._preparing is not None:
-            if not self.poll():
-                return None                      # still preparing: no outputs yet
-        elif self.reference is None:
-            if self._builder.add(rows, cols, xyz):
-                cells, mean = self._builder.result()
-                frames = self._builder.collected
-                if self.background:
-                    self._preparing = _Preparation(
-                        lambda: self._prepare_reference(cells, mean, frames))
-                else:
-                    self._set_reference(self._prepare_reference(cells, mean, frames))
-            return None
         ref = self.reference
         assert self.solver is not None and ref is not None
         t0 = time.perf_counter()
