@@ -35,9 +35,9 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-import scipy.linalg
 
 from tactile_sl_camera.elasticity import Elastomer, cell_kernel
+from tactile_sl_decoder.touch.cholesky import cho_factor_upper, cho_solve_upper
 
 
 @dataclass
@@ -97,14 +97,16 @@ class TractionSolver:
         s[4, :, 2] = -x                    # My = -sum x fz
         s[5, :, 0], s[5, :, 1] = -y, x     # Mz = sum x fy - y fx
         s = s.reshape(6, 3 * n)
-        fw = scipy.linalg.cho_factor(h + self.params.wrench_weight * eye, check_finite=False)
-        self._wrench_rows = scipy.linalg.cho_solve(fw, s.T, check_finite=False).T @ g.T
+        # (the factorisations release the GIL: touch/cholesky.py; a node prepares this in a
+        # worker thread while frames keep coming)
+        fw = cho_factor_upper(h + self.params.wrench_weight * eye)
+        self._wrench_rows = cho_solve_upper(fw, s.T).T @ g.T
         # standard deviation of (M_x, M_y) per metre of i.i.d. displacement noise
         self.moment_noise = (float(np.linalg.norm(self._wrench_rows[3])),
                              float(np.linalg.norm(self._wrench_rows[4])))
         self._g32 = g.astype(np.float32)      # forward model: fit residuals (calibration)
-        fm = scipy.linalg.cho_factor(h + self.params.map_weight * eye, check_finite=False)
-        full = scipy.linalg.cho_solve(fm, g.T, check_finite=False)
+        fm = cho_factor_upper(h + self.params.map_weight * eye)
+        full = cho_solve_upper(fm, g.T)
         # One contiguous matrix per force component: the normal one finds the support, the
         # tangential ones are then needed only on its rows (the map is memory-bound).
         self._map_rows = [np.ascontiguousarray(full[axis::3], dtype=np.float32)
