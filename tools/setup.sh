@@ -69,4 +69,6 @@ colcon --log-base "$ROOT/log" build --symlink-install \
   --base-paths "$ROOT/src" --build-base "$ROOT/build" --install-base "$ROOT/install" \
   --event-handlers console_direct- summary+ \
   --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VENV/bin/python"
+# compile the numba kernels into their on-disk cache now, so that no node compiles at start
+( set +u; source "$ROOT/install/local_setup.bash" && python -m tactile_sl_decoder.jit )
 log "done"

@@ -1,0 +1,56 @@
+"""Numba for the few per-glyph loops numpy cannot vectorise: compiled once, GIL released.
+
+Kernels are compiled ahead of use for the argument types given with them (``signature``),
+cached on disk beside their module (``make setup`` warms the cache, so a node starts without
+compiling), and release the GIL: the pipeline's two image workers run them in parallel.
+They are pure functions of arrays; the stage module that calls one keeps the numpy
+reference it replaces in its tests, bit for bit.
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+import time
+from typing import Any, Callable
+
+import numba
+
+_KERNELS: list[Any] = []
+
+KERNEL_MODULES = ("tactile_sl_decoder.decode.knn",)
+"""The modules that define kernels: importing them compiles (or loads) every kernel."""
+
+
+def kernel(signature: str | list[str]) -> Callable[[Callable[..., Any]], Any]:
+    """``numba.njit`` with this project's settings: eager ``signature``, cache, nogil.
+
+    No ``fastmath``: the kernels must give the same bits as the numpy code they replace.
+    """
+    def wrap(fn: Callable[..., Any]) -> Any:
+        compiled = numba.njit(signature, cache=True, nogil=True, error_model="numpy")(fn)
+        _KERNELS.append(compiled)
+        return compiled
+    return wrap
+
+
+def helper(fn: Callable[..., Any]) -> Any:
+    """A function only kernels call: compiled into each caller (typed by the call)."""
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+
+
+def compiled_kernels() -> list[Any]:
+    """Every kernel defined so far (those of the modules imported)."""
+    return list(_KERNELS)
+
+
+def warm() -> float:
+    """Compile every kernel into the on-disk cache (``make setup``); returns the seconds."""
+    start = time.perf_counter()
+    for name in KERNEL_MODULES:
+        importlib.import_module(name)
+    return time.perf_counter() - start
+
+
+if __name__ == "__main__":
+    print(f"[setup] numba kernels ready ({len(KERNEL_MODULES)} modules, {warm():.1f} s)",
+          file=sys.stderr)

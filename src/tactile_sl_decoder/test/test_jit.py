@@ -1,0 +1,18 @@
+"""Every numba kernel is warmed by `make setup` (its module is listed in jit.KERNEL_MODULES)."""
+import importlib
+import pkgutil
+
+import tactile_sl_decoder
+from tactile_sl_decoder import jit
+
+
+def test_every_kernel_module_is_warmed_at_setup():
+    for info in pkgutil.walk_packages(tactile_sl_decoder.__path__, "tactile_sl_decoder."):
+        if ".nodes" in info.name or info.name.endswith("__main__"):
+            continue                      # rclpy shells: no kernels there
+        importlib.import_module(info.name)
+    defined = {k.py_func.__module__ for k in jit.compiled_kernels()}
+    assert defined, "no kernel found"
+    assert defined == set(jit.KERNEL_MODULES)
+    for kernel in jit.compiled_kernels():   # compiled eagerly, without fastmath
+        assert kernel.signatures and not kernel.targetoptions.get("fastmath")
