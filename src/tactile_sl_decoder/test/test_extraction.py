@@ -9,11 +9,11 @@ from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.extract.extraction import (
     Detections,
     ExtractionParams,
-    estimate_spacing,
     extract_symbols,
     sample_patches,
     threshold_ink,
 )
+from tactile_sl_decoder.extract.spacing import estimate_spacing
 from tactile_sl_decoder.tooling.synth_glyphs import finish, render_at, synth_image
 
 

@@ -11,38 +11,10 @@ distance, then index: the results are the tree's, bit for bit (tests).
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
-from tactile_sl_decoder.jit import helper, kernel
-
-
-@helper
-def _buckets(x: np.ndarray, y: np.ndarray, cell: float) -> tuple[Any, ...]:
-    """Counting sort of the points into square buckets of side ``cell``.
-
-    Returns (bucket of each point, start, order, rows, cols): bucket b (row-major) holds
-    the points ``order[start[b]:start[b + 1]]``.
-    """
-    n = x.shape[0]
-    x0, y0 = x.min(), y.min()
-    cols = int((x.max() - x0) / cell) + 1
-    rows = int((y.max() - y0) / cell) + 1
-    bucket = np.empty(n, np.int64)
-    start = np.zeros(rows * cols + 1, np.int64)
-    for i in range(n):
-        b = int((y[i] - y0) / cell) * cols + int((x[i] - x0) / cell)
-        bucket[i] = b
-        start[b + 1] += 1
-    for b in range(rows * cols):
-        start[b + 1] += start[b]
-    fill = start[:-1].copy()
-    order = np.empty(n, np.int64)
-    for i in range(n):
-        order[fill[bucket[i]]] = i
-        fill[bucket[i]] += 1
-    return bucket, start, order, rows, cols
+from tactile_sl_decoder.jit import helper, kernel, point_buckets
 
 
 @helper
@@ -77,7 +49,7 @@ def knn_within(x: np.ndarray, y: np.ndarray, k: int, radius: float
     # buckets of a third of the radius, searched ring by ring around the point's bucket
     # until no unseen bucket can hold a point nearer than the k-th found
     cell = radius / 3.0
-    bucket, start, order, rows, cols = _buckets(x, y, cell)
+    bucket, start, order, rows, cols = point_buckets(x, y, cell)
     rings = int(math.ceil(radius / cell)) + 1
     bound = radius * radius
     best_d = np.empty(k)

@@ -25,6 +25,7 @@ from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.extract.centroid import closing_background, patch_centroid_offset
+from tactile_sl_decoder.extract.spacing import estimate_spacing, median
 
 _REMAP_MAX_ROWS = 32000  # cv2.remap wants maps smaller than SHRT_MAX rows
 
@@ -203,7 +204,7 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
             y0 + stats[:, cv2.CC_STAT_HEIGHT] < h)
     if not keep.any():
         return Detections.empty(params.patch_size)
-    typical = _median(pixels[keep])
+    typical = median(pixels[keep])
     ratio = pixels / typical
     keep &= (ratio >= params.min_area_ratio) & (ratio <= params.max_area_ratio)
     single = np.flatnonzero(keep & (ratio < params.split_ratio))
@@ -430,22 +431,12 @@ def _ink_box(mask: np.ndarray) -> tuple[int, int, np.ndarray] | None:
     return x0, y0, roi
 
 
-def _median(values: np.ndarray) -> float:
-    """np.median of a 1-D array without NaN (same value, a fraction of the overhead)."""
-    n = len(values)
-    h = n // 2
-    if n % 2:
-        return float(np.partition(values, h)[h])
-    part = np.partition(values, (h - 1, h))
-    return (float(part[h - 1]) + float(part[h])) / 2.0
-
-
 def _median_nn(points: np.ndarray, sample: int = 64) -> float:
     """Median nearest-neighbour distance of (a fixed subsample of) points."""
     tree = cKDTree(points)
     probe = points[:: max(1, len(points) // sample)]
     dist, _ = tree.query(probe, k=2)
-    return _median(dist[:, 1])
+    return median(dist[:, 1])
 
 
 def split_regions(labels: np.ndarray, stats: np.ndarray, ids: np.ndarray, k: np.ndarray,
@@ -526,44 +517,6 @@ def split_regions(labels: np.ndarray, stats: np.ndarray, ids: np.ndarray, k: np.
     counts = np.bincount(slot, minlength=3 * n).reshape(n, 3).astype(np.float64)
     ok = (slots[None, :] < k[:, None]) & (counts > 0)
     return seed_u[ok], seed_v[ok], counts[ok]
-
-
-def estimate_spacing(u: np.ndarray, v: np.ndarray, default: float = 18.0,
-                     search_px: float | None = None) -> tuple[float, np.ndarray]:
-    """Global spacing (median nearest-neighbour distance) and a per-glyph local spacing.
-
-    The local spacing is the mean distance to the two nearest neighbours (both are grid
-    neighbours even at the image edge), clipped to 0.6-1.6 times the global spacing so that
-    a stray detection next to a glyph cannot shrink its patch. With ``search_px``, neighbours
-    come from a search for all pairs closer than that (faster than k-nearest queries for
-    all glyphs); only glyphs with fewer than two neighbours in range are queried.
-    """
-    n = len(u)
-    if n < 2:
-        return 0.0, np.full(n, default, np.float32)
-    pts = np.column_stack((u, v)).astype(np.float64)
-    tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
-    first = np.full(n, np.inf)
-    second = np.full(n, np.inf)
-    if search_px is not None:
-        pairs = tree.query_pairs(float(search_px), output_type="ndarray")
-        d = np.hypot(*(pts[pairs[:, 0]] - pts[pairs[:, 1]]).T)
-        who = pairs.T.reshape(-1)
-        dist = np.concatenate((d, d))
-        np.minimum.at(first, who, dist)
-        is_first = dist == first[who]
-        np.minimum.at(second, who[~is_first], dist[~is_first])
-        # a tie for the nearest (a perfect lattice) makes it the second nearest too
-        second = np.where(np.bincount(who[is_first], minlength=n) >= 2, first, second)
-    lacking = np.flatnonzero(np.isinf(second))  # fewer than two neighbours within range
-    if len(lacking):
-        kk = min(3, n)
-        dist, _ = tree.query(pts[lacking], k=kk)
-        first[lacking], second[lacking] = dist[:, 1], dist[:, kk - 1]
-    spacing = _median(first)
-    local = (first + second) / 2.0
-    local = np.clip(local, 0.6 * spacing, 1.6 * spacing)
-    return spacing, local.astype(np.float32)
 
 
 def sample_patches(gray: np.ndarray, u: np.ndarray, v: np.ndarray, step: np.ndarray,
