@@ -110,7 +110,8 @@ def _render_sequences() -> list[str]:
 def _pipeline(args: argparse.Namespace, carry: bool = True):
     from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 
-    params = PipelineParams(threads=args.threads, cpu_threads=args.cpu_threads)
+    params = PipelineParams(threads=args.threads, cpu_threads=args.cpu_threads,
+                            classifier_weights=args.classifier)
     params.decode.mirrored = args.mirrored
     params.carry.enabled = carry
     return StereoPipeline(PatternSpec.load(args.pattern), None, params)
@@ -477,6 +478,9 @@ def main() -> int:
                    help="OpenCV / BLAS intra-op threads (0 = library defaults)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per frame")
     p.add_argument("--warmup", type=int, default=1, help="untimed runs per frame first")
+    p.add_argument("--classifier", default=None, metavar="WEIGHTS",
+                   help="classifier weights (default: the shipped ones, data/classifier.pt; "
+                   "LeNet-5: data/classifier_lenet5.pt)")
     p.add_argument("--carry", choices=("on", "off", "both"), default="on",
                    help="labels carried from the previous frame (both: alternate passes)")
     p.add_argument("--sequence", action="store_true",

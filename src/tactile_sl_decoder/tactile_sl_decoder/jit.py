@@ -14,11 +14,10 @@ import time
 from typing import Any, Callable
 
 import numba
-import numpy as np
 
 _KERNELS: list[Any] = []
 
-KERNEL_MODULES = ("tactile_sl_decoder.decode.knn", "tactile_sl_decoder.extract.spacing")
+KERNEL_MODULES = ("tactile_sl_decoder.neighbours", "tactile_sl_decoder.extract.spacing")
 """The modules that define kernels: importing them compiles (or loads) every kernel."""
 
 
@@ -37,33 +36,6 @@ def kernel(signature: str | list[str]) -> Callable[[Callable[..., Any]], Any]:
 def helper(fn: Callable[..., Any]) -> Any:
     """A function only kernels call: compiled into each caller (typed by the call)."""
     return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
-
-
-@helper
-def point_buckets(x: np.ndarray, y: np.ndarray, cell: float) -> tuple[Any, ...]:
-    """Counting sort of the points into square buckets of side ``cell``.
-
-    Returns (bucket of each point, start, order, rows, cols): bucket b (row-major) holds
-    the points ``order[start[b]:start[b + 1]]``.
-    """
-    n = x.shape[0]
-    x0, y0 = x.min(), y.min()
-    cols = int((x.max() - x0) / cell) + 1
-    rows = int((y.max() - y0) / cell) + 1
-    bucket = np.empty(n, np.int64)
-    start = np.zeros(rows * cols + 1, np.int64)
-    for i in range(n):
-        b = int((y[i] - y0) / cell) * cols + int((x[i] - x0) / cell)
-        bucket[i] = b
-        start[b + 1] += 1
-    for b in range(rows * cols):
-        start[b + 1] += start[b]
-    fill = start[:-1].copy()
-    order = np.empty(n, np.int64)
-    for i in range(n):
-        order[fill[bucket[i]]] = i
-        fill[bucket[i]] += 1
-    return bucket, start, order, rows, cols
 
 
 def compiled_kernels() -> list[Any]:

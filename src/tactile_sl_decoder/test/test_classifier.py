@@ -4,16 +4,18 @@ import pytest
 import torch
 
 from tactile_sl_decoder.classify.classifier import (
-    ARCH,
     DEFAULT_THRESHOLD,
     FORMAT,
     FORMAT_VERSION,
+    LENET_ARCH,
+    TINY_ARCH,
     Classifier,
     ClassifierError,
     FastLeNet,
+    FastTiny,
     default_weights_path,
 )
-from tactile_sl_decoder.classify.model import GlyphNet, standardise
+from tactile_sl_decoder.classify.model import GlyphNet, GlyphNetTiny, standardise
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.tooling.synth_glyphs import synth_image
@@ -21,7 +23,7 @@ from tactile_sl_decoder.tooling.training import label_detections, save_blob
 
 
 def _blob(model: GlyphNet, **over):
-    blob = {"format": FORMAT, "version": FORMAT_VERSION, "arch": ARCH, "classes": 3,
+    blob = {"format": FORMAT, "version": FORMAT_VERSION, "arch": LENET_ARCH, "classes": 3,
             "primitives": ["line", "circle", "triangle"], "threshold": 0.9,
             "state_dict": {k: v.clone() for k, v in model.state_dict().items()}, "meta": {}}
     blob.update(over)
@@ -43,6 +45,43 @@ def test_fast_path_matches_torch(classes, n):
     assert out.shape == (n, classes)
     if n:
         assert np.abs(out - ref).max() < 1e-4 * max(1.0, np.abs(ref).max())
+
+
+@pytest.mark.parametrize("classes,n,channels,hidden", [(3, 600, 16, 32), (5, 1, 8, 24),
+                                                       (3, 0, 16, 32), (3, 512, 4, 7), (3, 1100, 16, 32)])
+def test_tiny_fast_path_matches_torch(classes, n, channels, hidden):
+    """Blocks of 512 patches, odd sizes, one patch, none: the same logits as torch."""
+    torch.manual_seed(classes + n)
+    model = GlyphNetTiny(classes, channels, hidden).eval()
+    with torch.no_grad():
+        for p in model.parameters():
+            p.mul_(3.0)
+    patches = np.random.default_rng(n).integers(0, 256, (n, 18, 18), dtype=np.uint8)
+    patches[:1] = 77                                 # a flat patch (zero variance) too
+    with torch.no_grad():
+        ref = model(standardise(torch.from_numpy(patches))).numpy() if n else np.zeros((0,))
+    fast = FastTiny.from_state({k: v.numpy() for k, v in model.state_dict().items()})
+    out = fast.logits(patches)
+    assert out.shape == (n, classes)
+    if n:
+        assert np.abs(out - ref).max() < 1e-4 * max(1.0, np.abs(ref).max())
+
+
+def test_tiny_weights_load_and_mismatches_are_refused(tmp_path):
+    model = GlyphNetTiny(3).eval()
+    path = tmp_path / "tiny.pt"
+    save_blob(_blob(model, arch=TINY_ARCH), path)
+    clf = Classifier.load(path)
+    assert isinstance(clf.net, FastTiny) and clf.classes == 3
+    bad = {**model.state_dict(), "fc1.weight": torch.zeros(32, 100)}
+    torch.save(_blob(model, arch=TINY_ARCH, state_dict=bad), path)
+    with pytest.raises(ClassifierError, match=r"fc1\.weight has shape \(32, 100\), expected "
+                                              r"\(32, 256\)"):
+        Classifier.load(path)
+    torch.save(_blob(GlyphNet(3), arch=TINY_ARCH), path)     # LeNet weights, tiny tag
+    with pytest.raises(ClassifierError, match=r"conv1\.weight has shape \(6, 1, 5, 5\), expected "
+                                              r"\(6, 1, 3, 3\) for tiny9-18"):
+        Classifier.load(path)
 
 
 def test_load_roundtrip_and_threshold(tmp_path):
@@ -105,10 +144,12 @@ def test_weights_with_code_are_not_unpickled(tmp_path):
 
 
 @pytest.mark.slow
-def test_shipped_weights_classify_synthetic_glyphs():
+@pytest.mark.parametrize("name", ["classifier.pt", "classifier_lenet5.pt"])
+def test_shipped_weights_classify_synthetic_glyphs(name):
     """Independent renderer (not the training simulator): shipped weights still read it."""
-    assert default_weights_path().is_file()
-    clf = Classifier.load()
+    path = default_weights_path().with_name(name)
+    assert path.is_file()
+    clf = Classifier.load(path)
     assert clf.threshold == pytest.approx(DEFAULT_THRESHOLD)
     assert clf.primitives == ["line", "circle", "triangle"]
     correct = total = 0

@@ -1,13 +1,15 @@
 """Every numba kernel is warmed by `make setup` (its module is listed in jit.KERNEL_MODULES)."""
 import importlib
 import pkgutil
+from pathlib import Path
 
-import tactile_sl_decoder
 from tactile_sl_decoder import jit
+
+PACKAGE = Path(jit.__file__).parent
 
 
 def test_every_kernel_module_is_warmed_at_setup():
-    for info in pkgutil.walk_packages(tactile_sl_decoder.__path__, "tactile_sl_decoder."):
+    for info in pkgutil.walk_packages([str(PACKAGE)], "tactile_sl_decoder."):
         if ".nodes" in info.name or info.name.endswith("__main__"):
             continue                      # rclpy shells: no kernels there
         importlib.import_module(info.name)

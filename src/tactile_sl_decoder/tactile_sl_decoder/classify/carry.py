@@ -32,9 +32,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
+from tactile_sl_decoder.neighbours import nearest_within
 
 CROP = 3   # pixels left out on each side of a patch for the correlation (the glyph's ring)
 
@@ -87,7 +87,6 @@ class _Frame:
     carried_for: np.ndarray   # (N,) int: frames the label has been carried (0: classified)
     patches: np.ndarray       # (N, d) normalised_patches
     spacing_px: float
-    tree: cKDTree | None = None
 
 
 @dataclass
@@ -133,9 +132,10 @@ class LabelCarry:
         if not p.enabled or prev is None or n == 0 or len(prev.label) == 0 or \
                 out.spacing_px <= 0:
             return out
-        if prev.tree is None:
-            prev.tree = cKDTree(prev.predicted)
-        dist, j = prev.tree.query(pos, distance_upper_bound=p.radius * out.spacing_px)
+        dist, j = nearest_within(np.ascontiguousarray(pos[:, 0]), np.ascontiguousarray(pos[:, 1]),
+                                 np.ascontiguousarray(prev.predicted[:, 0]),
+                                 np.ascontiguousarray(prev.predicted[:, 1]),
+                                 p.radius * out.spacing_px)
         cand = np.flatnonzero(np.isfinite(dist))
         j = j[cand]
         # one glyph per previous glyph (two glyphs this close: one of them is no glyph)

@@ -1,13 +1,15 @@
-"""Glyph classification: load the shipped LeNet weights and label patches fast on one core.
+"""Glyph classification: load the shipped CNN weights and label patches fast on one core.
 
-Training uses torch (:mod:`tactile_sl_decoder.classify.model`); inference computes the same
-function without torch, as a handful of large numpy matrix products (OpenBLAS calls that
-release the GIL, so the two images' workers overlap), because torch's default CPU path costs
-7-9 ms for 1,000 patches of a net this small (framework overhead per layer, tiny
-convolutions), and importing torch alone costs a process ~3.5 s of CPU at start.  The same
-products on torch tensors were no faster (1,493 patches on one core of the development VM:
-numpy 10.6-13.5 ms, torch 11.1-13.1 ms in alternating rounds; the two images in two threads
-7.4 vs 8.9 ms):
+Two architectures (:mod:`tactile_sl_decoder.classify.model`): the default ``tiny9-18``
+(:class:`~.model.GlyphNetTiny`, ``data/classifier.pt``: a 2x2 mean-pool, one 3x3 convolution
+and two fully connected layers, about a third of LeNet's time per patch at LeNet's
+held-out accuracy) and LeNet-5 ``lenet5-18`` (``data/classifier_lenet5.pt``, selectable with
+the ``classifier_weights`` parameter or ``--weights``).  Training uses torch; inference
+computes the same functions without torch, as a handful of large numpy matrix products
+(OpenBLAS calls that release the GIL, so the two images' workers overlap), because torch's
+default CPU path costs 7-9 ms for 1,000 patches of a net this small (framework overhead per
+layer, tiny convolutions), and importing torch alone costs a process ~3.5 s of CPU at start.
+For LeNet (:class:`FastLeNet`):
 
 * conv1: output row r depends on input rows r..r+4. The 14 output columns are split into
   blocks 0..7 and 8..13 (pooling pairs never straddle them), which read input columns 0..11
@@ -30,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
 from tactile_sl_decoder.classify.weights_file import WeightsFileError, read_torch_zip
@@ -37,17 +40,35 @@ from tactile_sl_decoder.contract import LABEL_UNKNOWN, PATCH_SIZE
 
 FORMAT = "tactile_sl_classifier"
 FORMAT_VERSION = 1
-ARCH = "lenet5-18"
-"""Architecture tag of :mod:`.model` stored with the weights; another tag is refused."""
+LENET_ARCH = "lenet5-18"
+"""Architecture tag of :class:`~.model.GlyphNet` (LeNet-5) stored with the weights."""
+TINY_ARCH = "tiny9-18"
+"""Architecture tag of :class:`~.model.GlyphNetTiny` stored with the weights."""
+ARCH = TINY_ARCH
+"""The architecture of the shipped default weights (data/classifier.pt)."""
+ARCH_DESCRIPTIONS = {
+    LENET_ARCH: "LeNet-5 style, 18x18 grey patch (standardised per patch) -> conv 6@5x5 -> "
+                "max-pool -> conv 16@5x5 -> max-pool (ceil) -> FC 32 -> FC 64",
+    TINY_ARCH: "right-sized CNN, 18x18 grey patch (standardised per patch) -> 2x2 mean-pool "
+               "-> conv 16@3x3 -> max-pool (ceil) -> FC 32",
+}
+"""What each architecture is, for model cards and help texts."""
 DEFAULT_THRESHOLD = 0.9
 """Minimum softmax probability for a label to be reported; below it the label is 255."""
 
-_SHAPES = {
-    "conv1.weight": (6, 1, 5, 5), "conv1.bias": (6,),
-    "conv2.weight": (16, 6, 5, 5), "conv2.bias": (16,),
-    "fc1.weight": (32, 64), "fc1.bias": (32,),
-    "fc2.weight": (64, 32), "fc2.bias": (64,),
-    "out.weight": (None, 64), "out.bias": (None,),
+# Parameter shapes per architecture: ints are fixed, "K" the classes, "C" / "H" the tiny
+# net's channels and hidden units (read from the weights, the same everywhere they occur).
+_SHAPES: dict[str, dict[str, tuple[int | str, ...]]] = {
+    LENET_ARCH: {
+        "conv1.weight": (6, 1, 5, 5), "conv1.bias": (6,),
+        "conv2.weight": (16, 6, 5, 5), "conv2.bias": (16,),
+        "fc1.weight": (32, 64), "fc1.bias": (32,),
+        "fc2.weight": (64, 32), "fc2.bias": (64,),
+        "out.weight": ("K", 64), "out.bias": ("K",)},
+    TINY_ARCH: {
+        "conv1.weight": ("C", 1, 3, 3), "conv1.bias": ("C",),
+        "fc1.weight": ("H", "C16"), "fc1.bias": ("H",),
+        "out.weight": ("K", "H"), "out.bias": ("K",)},
 }
 
 
@@ -60,18 +81,26 @@ def default_weights_path() -> Path:
     return Path(__file__).resolve().parent.parent / "data" / "classifier.pt"
 
 
-def check_state(state: dict[str, Any]) -> int:
-    """Validate a state dict's names and shapes; returns the number of classes."""
-    missing = [k for k in _SHAPES if k not in state]
+def check_state(state: dict[str, Any], arch: str = LENET_ARCH) -> int:
+    """Validate a state dict's names and shapes for ``arch``; returns the number of classes."""
+    shapes = _SHAPES.get(arch)
+    if shapes is None:
+        raise ClassifierError(f"unknown architecture {arch!r} (known: {', '.join(_SHAPES)})")
+    missing = [k for k in shapes if k not in state]
     if missing:
-        raise ClassifierError(f"weights lack {', '.join(missing)} (not a {ARCH} state dict)")
-    classes = int(np.asarray(state["out.bias"]).shape[0])
-    for key, shape in _SHAPES.items():
-        want = tuple(classes if s is None else s for s in shape)
+        raise ClassifierError(f"weights lack {', '.join(missing)} (not a {arch} state dict)")
+    dims = {"K": int(np.asarray(state["out.bias"]).shape[0])}
+    if arch == TINY_ARCH:
+        dims["C"] = int(np.asarray(state["conv1.bias"]).shape[0])
+        dims["H"] = int(np.asarray(state["fc1.bias"]).shape[0])
+        dims["C16"] = 16 * dims["C"]
+    for key, shape in shapes.items():
+        want = tuple(dims[d] if isinstance(d, str) else d for d in shape)
         got = tuple(np.asarray(state[key]).shape)
         if got != want:
-            raise ClassifierError(f"weight {key} has shape {got}, expected {want} for {ARCH} "
-                                  f"with {classes} classes")
+            raise ClassifierError(f"weight {key} has shape {got}, expected {want} for {arch} "
+                                  f"with {dims['K']} classes")
+    classes = dims["K"]
     if classes < 2 or classes > 254:
         raise ClassifierError(f"{classes} classes is not a usable alphabet")
     return classes
@@ -101,7 +130,7 @@ class FastLeNet:
     @staticmethod
     def from_state(state: dict[str, Any]) -> FastLeNet:
         """Rearrange torch-layout weights into the banded matrices used by :meth:`logits`."""
-        check_state(state)
+        check_state(state, LENET_ARCH)
         s = {k: np.asarray(v, dtype=np.float32) for k, v in state.items()}
         w1, w2 = s["conv1.weight"], s["conv2.weight"]
         t1 = []
@@ -184,10 +213,96 @@ class FastLeNet:
 
 
 @dataclass
+class FastTiny:
+    """The numpy form of :class:`~tactile_sl_decoder.classify.model.GlyphNetTiny`.
+
+    The 2x2 average pool is OpenCV's area resize of the patches stacked into one tall
+    image; the 3x3 convolution of the 9x9 pooled patch is one matrix product of each output
+    row's three input rows (27 consecutive values) with a banded (27, 8 x channels) matrix.
+    Output rows are laid out even ones first (0, 2, 4, 6) then odd ones (1, 3, 5, 6) and the
+    columns likewise, so the ceil-mode 2x2 max-pool is two maxima of contiguous halves; the
+    standardisation, bias and ReLU come after it (they commute with max, as in
+    :class:`FastLeNet`).
+    """
+
+    band: np.ndarray   # (27, 8 * C): 3 pooled rows x 9 cols -> cols (0,2,4,6,1,3,5,6) x C
+    s1: np.ndarray     # (C,) sum of each kernel (the standardisation's mean term)
+    b1: np.ndarray     # (C,)
+    w2: np.ndarray     # (16 C, hidden) fc1, rows reordered to (row, col, channel)
+    b2: np.ndarray
+    w3: np.ndarray     # (hidden, classes)
+    b3: np.ndarray
+
+    _ORDER = (0, 2, 4, 6, 1, 3, 5, 6)   # conv output rows / columns: pooling partners apart
+
+    @staticmethod
+    def from_state(state: dict[str, Any]) -> FastTiny:
+        """Rearrange torch-layout weights into the banded matrix used by :meth:`logits`."""
+        check_state(state, TINY_ARCH)
+        s = {k: np.asarray(v, dtype=np.float32) for k, v in state.items()}
+        w1 = s["conv1.weight"]
+        channels = w1.shape[0]
+        band = np.zeros((3, 9, 8, channels), np.float32)   # (dy, input col, slot, channel)
+        for slot, c in enumerate(FastTiny._ORDER):
+            for dx in range(3):
+                band[:, c + dx, slot, :] = 0.25 * w1[:, 0, :, dx].T   # 0.25: the mean pool
+        hidden = s["fc1.weight"].shape[0]
+        w2 = s["fc1.weight"].reshape(hidden, channels, 4, 4).transpose(2, 3, 1, 0)
+        return FastTiny(band.reshape(27, 8 * channels), w1.sum(axis=(1, 2, 3)),
+                        s["conv1.bias"], np.ascontiguousarray(w2.reshape(16 * channels, hidden)),
+                        s["fc1.bias"], np.ascontiguousarray(s["out.weight"].T), s["out.bias"])
+
+    _BLOCK = 512   # patches per pass: the convolution's output (4 KB a patch) stays in cache
+
+    def logits(self, patches: np.ndarray) -> np.ndarray:
+        """(N, classes) float32 logits of (N, 18, 18) uint8 patches."""
+        n = patches.shape[0]
+        if n == 0:
+            return np.zeros((0, self.b3.shape[0]), np.float32)
+        if n <= self._BLOCK:
+            return self._logits(patches)
+        out = np.empty((n, self.b3.shape[0]), np.float32)
+        for start in range(0, n, self._BLOCK):
+            out[start:start + self._BLOCK] = self._logits(patches[start:start + self._BLOCK])
+        return out
+
+    def _logits(self, patches: np.ndarray) -> np.ndarray:
+        n = patches.shape[0]
+        channels = self.s1.shape[0]
+        x = np.ascontiguousarray(patches).reshape(n, PATCH_SIZE * PATCH_SIZE).astype(np.float32)
+        size = np.float32(x.shape[1])
+        mean = (x @ np.ones(x.shape[1], np.float32)) / size
+        var = np.einsum("ij,ij->i", x, x) / size - mean * mean
+        inv = np.float32(1.0) / (np.sqrt(np.maximum(var, np.float32(0.0))) + np.float32(1.0))
+        pooled = cv2.resize(x.reshape(n * PATCH_SIZE, PATCH_SIZE), (9, 9 * n),
+                            interpolation=cv2.INTER_AREA).reshape(n, 81) * np.float32(4.0)
+        # each output row's 3 input rows: rows 0, 2, 4, 6 then 1, 3, 5, 6
+        rows = np.empty((n, 8, 27), np.float32)
+        step = pooled.strides[1]
+        view = np.lib.stride_tricks.as_strided
+        rows[:, 0:4] = view(pooled, (n, 4, 27), (pooled.strides[0], 18 * step, step))
+        rows[:, 4:7] = view(pooled[:, 9:], (n, 3, 27), (pooled.strides[0], 18 * step, step))
+        rows[:, 7] = pooled[:, 54:81]
+        conv = (rows.reshape(n * 8, 27) @ self.band).reshape(n, 8, 8 * channels)
+        by_row = np.maximum(conv[:, 0:4], conv[:, 4:8])                   # (n, 4, 8 C)
+        feats = np.maximum(by_row[:, :, :4 * channels], by_row[:, :, 4 * channels:])
+        feats = feats.reshape(n, 16, channels)                           # (row, col, ch)
+        feats *= inv[:, None, None]
+        feats += self.b1 - (mean * inv)[:, None, None] * self.s1
+        np.maximum(feats, np.float32(0.0), out=feats)
+        h = feats.reshape(n, 16 * channels) @ self.w2
+        h += self.b2
+        np.maximum(h, np.float32(0.0), out=h)
+        out = h @ self.w3
+        out += self.b3
+        return out
+
+
+@dataclass
 class Classifier:
     """Labels glyph patches with a symbol value and a confidence (softmax probability)."""
 
-    net: FastLeNet
+    net: FastLeNet | FastTiny
     classes: int
     threshold: float = DEFAULT_THRESHOLD
     primitives: list[str] = field(default_factory=list)
@@ -220,12 +335,13 @@ class Classifier:
         if blob.get("version") != FORMAT_VERSION:
             raise ClassifierError(f"{source}: format version {blob.get('version')!r}, this "
                                   f"build reads version {FORMAT_VERSION}; retrain or upgrade")
-        if blob.get("arch") != ARCH:
-            raise ClassifierError(f"{source}: architecture {blob.get('arch')!r}, expected "
-                                  f"{ARCH!r}")
+        arch = blob.get("arch")
+        if arch not in _NETS:
+            raise ClassifierError(f"{source}: architecture {arch!r}, expected one of "
+                                  f"{', '.join(repr(a) for a in _NETS)}")
         state = {k: _to_numpy(v) for k, v in dict(blob.get("state_dict", {})).items()}
         try:
-            net = FastLeNet.from_state(state)
+            net = _NETS[arch].from_state(state)
         except ClassifierError as exc:
             raise ClassifierError(f"{source}: {exc}") from None
         classes = int(state["out.bias"].shape[0])
@@ -254,6 +370,10 @@ class Classifier:
         label = label.astype(np.uint8)
         label[conf < self.threshold] = LABEL_UNKNOWN
         return label, conf
+
+
+_NETS: dict[str, type[FastLeNet] | type[FastTiny]] = {LENET_ARCH: FastLeNet,
+                                                       TINY_ARCH: FastTiny}
 
 
 def _torch_load(path: Path, reason: WeightsFileError) -> Any:

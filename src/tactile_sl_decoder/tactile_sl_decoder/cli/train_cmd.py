@@ -7,7 +7,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-from tactile_sl_decoder.classify.classifier import DEFAULT_THRESHOLD, default_weights_path
+from tactile_sl_decoder.classify.classifier import (
+    ARCH,
+    ARCH_DESCRIPTIONS,
+    DEFAULT_THRESHOLD,
+    default_weights_path,
+)
 from tactile_sl_decoder.cli.argtypes import number
 
 
@@ -16,7 +21,7 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "train", help="train the glyph classifier on simulated images (CPU, minutes)",
         description="Render stereo frames with the simulator (random indenters and nuisances), "
-        "extract glyphs, label them from the ground truth and train the LeNet classifier. "
+        "extract glyphs, label them from the ground truth and train the glyph classifier. "
         "Held-out frames use other seeds and other indenter kinds. Writes the weights "
         "(default: the ones the package ships) and a model card next to them.")
     p.add_argument("--frames", type=number(int, 1, 100_000), default=160,
@@ -31,12 +36,15 @@ def register(subparsers: Any) -> None:
                    help=f"confidence threshold stored with the weights ({DEFAULT_THRESHOLD})")
     p.add_argument("--artwork", default=None,
                    help="artwork PNG the simulator renders (default: the installed one)")
+    p.add_argument("--arch", choices=sorted(ARCH_DESCRIPTIONS), default=ARCH,
+                   help=f"network (default {ARCH}): " + "; ".join(
+                       f"{k}: {v}" for k, v in ARCH_DESCRIPTIONS.items()))
     p.add_argument("--threads", type=number(int, 1, 1024), default=1,
                    help="torch CPU threads (default 1)")
     p.add_argument("-o", "--output", type=Path, default=None,
                    help=f"weights file (default {default_weights_path()})")
     p.add_argument("--card", type=Path, default=None,
-                   help="model card (default: classifier_card.md next to the weights)")
+                   help="model card (default: <weights name>_card.md next to the weights)")
     p.set_defaults(func=run)
 
 
@@ -45,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from tactile_sl_camera.safe_files import OutputError, atomic_path, check_output, write_text
 
     out = args.output or default_weights_path()
-    card = args.card or out.with_name("classifier_card.md")
+    card = args.card or out.with_name(out.stem + "_card.md")
     try:     # before minutes of rendering and training: can the results be written?
         check_output(out)
         check_output(card)
@@ -82,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     data_seconds = time.monotonic() - start
     result = train(train_set, val_set, len(DEFAULT_PRIMITIVES), list(DEFAULT_PRIMITIVES),
-                   epochs=args.epochs, seed=args.seed, threshold=args.threshold,
+                   epochs=args.epochs, seed=args.seed, threshold=args.threshold, arch=args.arch,
                    meta={"seed": args.seed, "torch": str(torch.__version__),
                          "frames": args.frames, "val_frames": args.val_frames})
     try:
@@ -108,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
             "shift +-1.2 px, "
             "gamma, contrast, offset, blur, noise.")
     try:
-        write_text(card, model_card(result, note, data_seconds))
+        write_text(card, model_card(result, note, data_seconds, out.name))
     except OSError as exc:
         print(f"train: cannot write {card}: {exc.strerror or exc}", file=sys.stderr)
         return 1

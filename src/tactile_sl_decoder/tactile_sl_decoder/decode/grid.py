@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.decode.knn import knn_within
+from tactile_sl_decoder.neighbours import knn_within
 
 # Offsets of the 3x3 neighbourhood, row-major: index 3 * (dr + 1) + (dc + 1).
 OFFSETS = np.array([(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1)], dtype=np.int64)
@@ -152,7 +152,7 @@ def nearest_neighbours(u: np.ndarray, v: np.ndarray, k: int, spacing_hint: float
     count are ``inf`` (their index is meaningless).  Step 1 of :func:`build_grid`, exposed
     so that it can run per image in a worker thread (GIL released) and be passed to
     :func:`build_grid` as ``neighbours``.  With a spacing hint the search runs on a bucket
-    grid (:func:`~tactile_sl_decoder.decode.knn.knn_within`, the k-d tree's results bit for
+    grid (:func:`~tactile_sl_decoder.neighbours.knn_within`, the k-d tree's results bit for
     bit at a third of its cost), without one on a k-d tree.
     """
     x = np.ascontiguousarray(np.asarray(u, np.float64).reshape(-1))

@@ -13,7 +13,8 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.jit import helper, kernel, point_buckets
+from tactile_sl_decoder.jit import helper, kernel
+from tactile_sl_decoder.neighbours import point_buckets
 
 
 @helper

@@ -27,7 +27,7 @@ from typing import Any, Callable, TextIO
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.classify.classifier import ARCH, FORMAT, FORMAT_VERSION
+from tactile_sl_decoder.classify.classifier import ARCH, ARCH_DESCRIPTIONS, FORMAT, FORMAT_VERSION
 from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.extract.extraction import ExtractionParams, extract_symbols
 
@@ -307,17 +307,17 @@ class TrainResult:
 def train(train_set: PatchSet, val_set: PatchSet, classes: int, primitives: list[str],
           epochs: int = 12, seed: int = 0, threshold: float = 0.9, batch: int = 256,
           lr: float = 3e-3, progress_stream: TextIO | None = None,
-          meta: dict[str, Any] | None = None) -> TrainResult:
-    """Train GlyphNet with Adam + cosine decay; returns the weights blob and held-out figures."""
+          meta: dict[str, Any] | None = None, arch: str = ARCH) -> TrainResult:
+    """Train the net ``arch`` with Adam and a one-cycle schedule; weights and held-out figures."""
     import torch
 
     from tactile_sl_decoder.classify.classifier import Classifier
-    from tactile_sl_decoder.classify.model import GlyphNet, standardise
+    from tactile_sl_decoder.classify.model import make_model, standardise
 
     start = time.monotonic()
     torch.manual_seed(seed)
     gen = torch.Generator().manual_seed(seed)
-    model = GlyphNet(classes)
+    model = make_model(arch, classes)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     steps = epochs * max(1, math.ceil(len(train_set) / batch))
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=steps)
@@ -339,7 +339,7 @@ def train(train_set: PatchSet, val_set: PatchSet, classes: int, primitives: list
             bar.update(1, f"loss {loss.item():.4f}")
     model.eval()
     state = {k: v.detach().clone() for k, v in model.state_dict().items()}
-    blob = {"format": FORMAT, "version": FORMAT_VERSION, "arch": ARCH, "classes": classes,
+    blob = {"format": FORMAT, "version": FORMAT_VERSION, "arch": arch, "classes": classes,
             "primitives": list(primitives), "threshold": float(threshold),
             "state_dict": state, "meta": dict(meta or {})}
     clf = Classifier.from_blob(blob)
@@ -358,14 +358,15 @@ def train(train_set: PatchSet, val_set: PatchSet, classes: int, primitives: list
         confusion, time.monotonic() - start, epochs)
 
 
-def model_card(result: TrainResult, data_note: str, data_seconds: float) -> str:
+def model_card(result: TrainResult, data_note: str, data_seconds: float,
+               weights_name: str = "classifier.pt") -> str:
     """Markdown model card: data, training time, held-out accuracy, confusion matrix."""
     prims = result.blob["primitives"]
+    arch = result.blob["arch"]
     lines = [
-        "# Glyph classifier (`classifier.pt`)", "",
-        f"Architecture `{result.blob['arch']}`: LeNet-5 style, 18x18 grey patch (standardised "
-        "per patch) -> conv 6@5x5 -> max-pool -> conv 16@5x5 -> max-pool (ceil) -> FC 32 -> "
-        f"FC 64 -> {result.blob['classes']} outputs ({', '.join(prims)}). "
+        f"# Glyph classifier (`{weights_name}`)", "",
+        f"Architecture `{arch}`: {ARCH_DESCRIPTIONS[arch]} -> {result.blob['classes']} outputs "
+        f"({', '.join(prims)}). "
         f"Confidence threshold {result.blob['threshold']:.2f}: below it the label is 255.", "",
         "## Data", "", data_note, "",
         f"- training patches: {result.train_patches}",

@@ -1,4 +1,8 @@
-"""k nearest neighbours within a radius on a bucket grid (numba; no k-d tree to build).
+"""Neighbour searches among glyph centres on a bucket grid (numba; no k-d tree to build).
+
+Shared by the stages: the lattice's k nearest neighbours (:func:`knn_within`), the carried
+labels' match to the previous frame (:func:`nearest_within`) and the spacing estimate
+(:func:`point_buckets`).
 
 Glyph centres are nearly a lattice and the lattice search only wants the neighbours within
 three spacings: a square bucket grid of a third of that radius, searched in rings around a
@@ -11,10 +15,38 @@ distance, then index: the results are the tree's, bit for bit (tests).
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
-from tactile_sl_decoder.jit import helper, kernel, point_buckets
+from tactile_sl_decoder.jit import helper, kernel
+
+
+@helper
+def point_buckets(x: np.ndarray, y: np.ndarray, cell: float) -> tuple[Any, ...]:
+    """Counting sort of the points into square buckets of side ``cell``.
+
+    Returns (bucket of each point, start, order, rows, cols): bucket b (row-major) holds
+    the points ``order[start[b]:start[b + 1]]``.
+    """
+    n = x.shape[0]
+    x0, y0 = x.min(), y.min()
+    cols = int((x.max() - x0) / cell) + 1
+    rows = int((y.max() - y0) / cell) + 1
+    bucket = np.empty(n, np.int64)
+    start = np.zeros(rows * cols + 1, np.int64)
+    for i in range(n):
+        b = int((y[i] - y0) / cell) * cols + int((x[i] - x0) / cell)
+        bucket[i] = b
+        start[b + 1] += 1
+    for b in range(rows * cols):
+        start[b + 1] += start[b]
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[fill[bucket[i]]] = i
+        fill[bucket[i]] += 1
+    return bucket, start, order, rows, cols
 
 
 @helper
@@ -78,4 +110,46 @@ def knn_within(x: np.ndarray, y: np.ndarray, k: int, radius: float
         for m in range(found):
             dist[i, m] = math.sqrt(best_d[m])
             idx[i, m] = best_i[m]
+    return dist, idx
+
+
+@kernel("Tuple((float64[::1], int64[::1]))(float64[::1], float64[::1], float64[::1], "
+        "float64[::1], float64)")
+def nearest_within(qx: np.ndarray, qy: np.ndarray, px: np.ndarray, py: np.ndarray,
+                   radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """For every query point, the nearest of the points (px, py) closer than ``radius``.
+
+    Distance (sqrt of the squared sum) and index, ``inf`` and len(px) where none is that
+    close; equal distances go to the lower index.  As ``cKDTree(p).query(q, k=1,
+    distance_upper_bound=radius)``.
+    """
+    nq, npts = qx.shape[0], px.shape[0]
+    dist = np.full(nq, np.inf)
+    idx = np.full(nq, npts, np.int64)
+    if nq == 0 or npts == 0:
+        return dist, idx
+    cell = radius
+    bucket, start, order, rows, cols = point_buckets(px, py, cell)
+    x0, y0 = px.min(), py.min()
+    bound = radius * radius
+    for i in range(nq):
+        bi = int(math.floor((qy[i] - y0) / cell))
+        bj = int(math.floor((qx[i] - x0) / cell))
+        best = bound
+        who = npts
+        for r in range(max(bi - 1, 0), min(bi + 2, rows)):
+            for c in range(max(bj - 1, 0), min(bj + 2, cols)):
+                b = r * cols + c
+                for p in range(start[b], start[b + 1]):
+                    j = order[p]
+                    dx = qx[i] - px[j]
+                    dy = qy[i] - py[j]
+                    d = 0.0 + dx * dx
+                    d = d + dy * dy
+                    if d < best or (d == best and j < who and d < bound):
+                        best = d
+                        who = j
+        if who < npts:
+            dist[i] = math.sqrt(best)
+            idx[i] = who
     return dist, idx

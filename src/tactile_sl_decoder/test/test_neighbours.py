@@ -1,9 +1,9 @@
-"""Bucket-grid k-NN (decode/knn.py) equals scipy's k-d tree query, bit for bit."""
+"""Bucket-grid neighbour searches (neighbours.py) equal scipy's k-d tree queries, bit for bit."""
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.decode.knn import knn_within
+from tactile_sl_decoder.neighbours import knn_within, nearest_within
 
 
 def _tree(x, y, k, radius):
@@ -44,3 +44,17 @@ def test_few_or_no_points():
     assert d.shape == (0, 3) and i.shape == (0, 3)
     d, i = knn_within(np.array([1.0, 2.0]), np.array([1.0, 1.0]), 4, 5.0)
     assert list(i[0]) == [0, 1, 2, 2] and d[0, 1] == 1.0 and np.isinf(d[0, 2])
+
+
+@pytest.mark.parametrize("seed,radius", [(0, 5.0), (1, 0.3 * 17.5), (2, 40.0)])
+def test_nearest_within_equals_the_kd_tree(seed, radius):
+    x, y = _lattice(27, 28, 17.5, 1.0, seed, 0.1)
+    rng = np.random.default_rng(seed + 10)
+    qx = x + rng.normal(0, 3.0, len(x)) - 20.0 * (rng.random(len(x)) < 0.05)
+    qy = y + rng.normal(0, 3.0, len(y))
+    d0, i0 = cKDTree(np.column_stack([x, y])).query(np.column_stack([qx, qy]),
+                                                     distance_upper_bound=radius)
+    d1, i1 = nearest_within(qx, qy, x, y, radius)
+    assert np.array_equal(d0, d1) and np.array_equal(i0, i1)
+    d, i = nearest_within(qx, qy, np.zeros(0), np.zeros(0), radius)
+    assert np.all(np.isinf(d)) and np.all(i == 0)
