@@ -47,8 +47,8 @@ def test_fast_path_matches_torch(classes, n):
         assert np.abs(out - ref).max() < 1e-4 * max(1.0, np.abs(ref).max())
 
 
-@pytest.mark.parametrize("classes,n,channels,hidden", [(3, 600, 16, 32), (5, 1, 8, 24),
-                                                       (3, 0, 16, 32), (3, 512, 4, 7), (3, 1100, 16, 32)])
+@pytest.mark.parametrize("classes,n,channels,hidden", [
+    (3, 600, 16, 32), (5, 1, 8, 24), (3, 0, 16, 32), (3, 512, 4, 7), (3, 1100, 16, 32)])
 def test_tiny_fast_path_matches_torch(classes, n, channels, hidden):
     """Blocks of 512 patches, odd sizes, one patch, none: the same logits as torch."""
     torch.manual_seed(classes + n)
