@@ -1,11 +1,17 @@
 #!/usr/bin/env python3
-"""Digest of every point cloud `tactile-sl replay` makes from the bundled bags.
+"""Digests of every point cloud and touch output `tactile-sl replay` makes of the bundled bags.
 
-The refactoring check of the layout (issue 9): the points of every bag must stay
-byte-identical.  ``--write FILE`` records the digests of the current tree (run it on the
-tree before a change); ``src/tactile_sl_decoder/test/test_points_unchanged.py`` recomputes
-them and compares.  Per bag: the number of frames, and per frame the stamp, the point
-count and the SHA-256 of the PointCloud2 data bytes.
+The refactoring check (issues 9, 26, 29): the points and touch outputs of every bag must
+stay byte-identical unless a change is meant to alter them.  ``--write FILE`` records the
+current tree's digests into FILE (``src/tactile_sl_decoder/test/data/points_digests.json``),
+``src/tactile_sl_decoder/test/test_points_unchanged.py`` recomputes and compares them.
+
+Per bag and output topic (points, field, wrench, contact, depth): per message the stamp, its
+size (points / cells for the clouds, 1 otherwise) and the SHA-256 of its serialised data.
+Stamps and sizes hold on every machine (``frames``); the bytes only on the CPU model they
+were computed on (numpy and OpenCV pick SIMD code paths per CPU, which can move a float's
+last bit), so they are kept per CPU model (``digests``): writing adds or replaces this
+CPU's entry and keeps the others' for the bags whose frames did not change.
 """
 from __future__ import annotations
 
@@ -20,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
+TOPICS = ("points", "field", "wrench", "contact", "depth")
 
 
 def cpu_model() -> str:
@@ -33,53 +40,71 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
-def replay_digests(bag: Path, workdir: Path) -> list[list[Any]]:
-    """[stamp_ns, points, sha256] of each /tactile/points message `tactile-sl replay` writes."""
+def replay_digests(bag: Path, workdir: Path) -> dict[str, list[list[Any]]]:
+    """Per topic, [stamp_ns, size, sha256] of each message `tactile-sl replay` writes."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
     from tactile_sl_decoder.cli import main
 
-    out = workdir / (bag.stem + ".points.mcap")
-    # points do not depend on the touch stage; without it each bag skips a ~1 s tare
-    code = main(["replay", str(bag), "-o", str(out), "--no-progress", "--no-touch"])
+    out = workdir / (bag.stem + ".out.mcap")
+    code = main(["replay", str(bag), "-o", str(out), "--no-progress"])
     if code:
         raise RuntimeError(f"tactile-sl replay {bag.name} exited {code}")
-    frames = []
+    found: dict[str, list[list[Any]]] = {t: [] for t in TOPICS}
     with open(out, "rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for _schema, _channel, _message, msg in reader.iter_decoded_messages(
-                topics=["/tactile/points"]):
+        for _schema, channel, message, msg in reader.iter_decoded_messages(
+                topics=[f"/tactile/{t}" for t in TOPICS]):
             stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-            data = bytes(msg.data)
-            frames.append([stamp, msg.width * msg.height, hashlib.sha256(data).hexdigest()])
+            size = msg.width * msg.height if hasattr(msg, "point_step") else 1
+            found[channel.topic.rsplit("/", 1)[1]].append(
+                [stamp, size, hashlib.sha256(bytes(message.data)).hexdigest()])
     out.unlink()
-    return frames
+    return found
 
 
-def bag_digests(bags: list[Path]) -> dict[str, Any]:
-    """Digests of every bag, with the CPU they were computed on."""
-    result: dict[str, Any] = {"cpu": cpu_model(), "bags": {}}
+def bag_digests(bags: list[Path]) -> dict[str, dict[str, list[list[Any]]]]:
+    """Digests of every bag on this machine."""
+    result = {}
     with tempfile.TemporaryDirectory() as tmp:
         for i, bag in enumerate(bags):
             print(f"[{i + 1}/{len(bags)}] {bag.name}", file=sys.stderr, flush=True)
-            result["bags"][bag.name] = replay_digests(bag, Path(tmp))
+            result[bag.name] = replay_digests(bag, Path(tmp))
     return result
+
+
+def record(digests: dict[str, Any], old: dict[str, Any] | None) -> dict[str, Any]:
+    """The file's content: frames and sizes, this CPU's bytes, other CPUs' still valid ones."""
+    frames = {bag: {t: [m[:2] for m in msgs] for t, msgs in topics.items()}
+              for bag, topics in digests.items()}
+    cpu = cpu_model()
+    by_cpu: dict[str, Any] = {cpu: {bag: {t: [m[2] for m in msgs] for t, msgs in topics.items()}
+                                    for bag, topics in digests.items()}}
+    for other, bags in (old or {}).get("digests", {}).items():
+        if other != cpu:       # kept for the bags (topics) whose frames are unchanged
+            by_cpu[other] = {bag: {t: h for t, h in topics.items()
+                                   if old["frames"].get(bag, {}).get(t) == frames[bag].get(t)}
+                             for bag, topics in bags.items() if bag in frames}
+    return {"frames": frames, "digests": by_cpu}
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bags", type=Path, default=REPO / "bags")
-    parser.add_argument("--write", type=Path, help="write the digests as JSON here")
+    parser.add_argument("--write", type=Path, help="record the digests in this JSON file")
     args = parser.parse_args()
     digests = bag_digests(sorted(args.bags.glob("*.mcap")))
-    text = json.dumps(digests, indent=1) + "\n"
-    if args.write:
-        tmp = args.write.with_suffix(".tmp")
-        tmp.write_text(text)
-        os.replace(tmp, args.write)
-    else:
-        sys.stdout.write(text)
+    if not args.write:
+        json.dump(digests, sys.stdout, indent=1)
+        return 0
+    old = json.loads(args.write.read_text()) if args.write.exists() else None
+    text = json.dumps(record(digests, old), indent=1) + "\n"
+    tmp = args.write.with_suffix(".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, args.write)
+    print(f"recorded {len(digests)} bags for CPU {cpu_model()!r} in {args.write}",
+          file=sys.stderr)
     return 0
 
 
