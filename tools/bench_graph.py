@@ -4,7 +4,13 @@ Both are the installed executables, run as separate processes (namespace /tactil
 namespace per sensor with ``--sensors N``: N replay + decoder pairs on one machine, as on a
 hand with several sensors; loopback DDS, private domain). The replay restamps every stereo
 frame with the time it is published, so latency = arrival time of the cloud here - its
-stamp. A frame is dropped if no cloud with its stamp arrives. Figures, not a pass/fail test.
+stamp. A frame is dropped if no cloud with its stamp arrives. This listener also subscribes
+to every decoder's ``wrench`` (what a grasp controller reads): the same for the touch outputs,
+every frame after the reference (the first) is expected to get one. Latency and drops are
+printed over all frames and over those stamped ``--settle`` seconds after the first cloud
+(without the one-time start: DDS discovery, first allocations, the touch reference's
+preparation, during which frames wait and get their wrench late). Figures, not a pass/fail
+test.
 
     python tools/bench_graph.py --rate 3 --seconds 60    # 30 Hz for 60 s
     python tools/bench_graph.py --rate 6 --seconds 60    # 60 Hz
@@ -28,6 +34,7 @@ import time
 
 import numpy as np
 import rclpy
+from geometry_msgs.msg import WrenchStamped
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -72,6 +79,9 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
                         help="take the 'start' CPU / memory sample this many seconds after the "
                         "first cloud (memory growth without start-up: allocator pools, the "
                         "touch reference)")
+    parser.add_argument("--settle", type=float, default=3.0,
+                        help="seconds after the first cloud from which the steady-state "
+                             "figures are taken (default 3)")
     parser.add_argument("--param", action="append", default=[], metavar="NAME:=VALUE",
                         help="extra decoder parameter (repeatable), e.g. "
                              "pipeline.threads:=1")
@@ -97,21 +107,26 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     latency_ms: dict[str, dict[int, float]] = {ns: {} for ns in spaces}
+    wrench_ms: dict[str, dict[int, float]] = {ns: {} for ns in spaces}
+    first_stamp: dict[str, int] = {}
     samples: dict[str, dict[str, tuple[float, float, float]]] = {"start": {}, "end": {}}
     procs: dict[str, subprocess.Popen] = {}
     first_cloud: list[float | None] = [None]
 
-    def listener(ns: str):
-        def on_cloud(msg: PointCloud2) -> None:
+    def listener(ns: str, into: dict[str, dict[int, float]]):
+        def on_message(msg: PointCloud2 | WrenchStamped) -> None:
             stamp = stamp_to_ns(msg.header.stamp.sec, msg.header.stamp.nanosec)
-            latency_ms[ns].setdefault(stamp, (time.time_ns() - stamp) / 1e6)
+            into[ns].setdefault(stamp, (time.time_ns() - stamp) / 1e6)
+            first_stamp.setdefault(ns, stamp)
             if first_cloud[0] is None:
                 first_cloud[0] = time.monotonic()
-        return on_cloud
+        return on_message
 
+    reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
     for ns in spaces:
-        node.create_subscription(PointCloud2, f"{ns}/points", listener(ns),
-                                 QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE))
+        node.create_subscription(PointCloud2, f"{ns}/points", listener(ns, latency_ms), reliable)
+        node.create_subscription(WrenchStamped, f"{ns}/wrench", listener(ns, wrench_ms),
+                                 reliable)
     env = ros_env(args.domain_id)
     try:
         for ns in spaces:
@@ -184,13 +199,10 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
     received = 0
     for ns in spaces:
-        lat = np.array(list(latency_ms[ns].values()))
-        received += len(lat)
-        print(f"{ns}: clouds received {len(lat)}, dropped {expected - len(lat)}")
-        if len(lat):
-            print(f"{ns}: latency image stamp -> cloud received: median {np.median(lat):.1f} ms,"
-                  f" p90 {np.percentile(lat, 90):.1f} ms, p99 {np.percentile(lat, 99):.1f} ms, "
-                  f"max {lat.max():.1f} ms")
+        received += len(latency_ms[ns])
+        first = first_stamp.get(ns)
+        for what, got, reference in (("cloud", latency_ms[ns], 0), ("wrench", wrench_ms[ns], 1)):
+            _report(ns, what, got, expected - reference, first, args.settle, latency_ms[ns])
     start, end = samples["start"], samples["end"]
     for name in procs:
         if name in start and name in end:
@@ -203,6 +215,30 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
     # delivered nothing at all (a node that did not start) is an error, so that
     # `make bench` goes on to its other benchmarks on machines that drop frames.
     return 0 if received > 0 else 1
+
+
+def _report(ns: str, what: str, got: dict[int, float], expected: int, first: int | None,
+            settle_s: float, clouds: dict[int, float]) -> None:
+    """Drops and latency of one output, over all frames and after ``settle_s`` seconds.
+
+    Steady state: the frames stamped ``settle_s`` after the first stamp; there a wrench is
+    missing if a cloud of that stamp came and no wrench.
+    """
+    lat = np.array(list(got.values()))
+    print(f"{ns}: {what} messages received {len(lat)} of {expected}, dropped "
+          f"{expected - len(lat)}" +
+          (f"; latency image stamp -> {what} received: median {np.median(lat):.1f} ms, p99 "
+           f"{np.percentile(lat, 99):.1f} ms, max {lat.max():.1f} ms" if len(lat) else ""))
+    if first is None or not len(lat):
+        return
+    cut = first + settle_s * 1e9
+    steady = np.array([v for stamp, v in got.items() if stamp >= cut])
+    missing = sum(1 for stamp in clouds if stamp >= cut and stamp not in got)
+    if len(steady):
+        print(f"{ns}: {what} messages from {settle_s:g} s on: {len(steady)}, {missing} "
+              f"missing where a cloud came; latency median {np.median(steady):.1f} ms, p90 "
+              f"{np.percentile(steady, 90):.1f} ms, p99 {np.percentile(steady, 99):.1f} ms, "
+              f"max {steady.max():.1f} ms")
 
 
 def _sample(procs: dict[str, subprocess.Popen]) -> dict[str, tuple[float, float, float]]:

@@ -16,7 +16,8 @@ With touch outputs (the default; --no-touch leaves them out) the touch stage run
 every frame as in the node and replay ("touch", "total+touch"; "cpu+touch" is the process
 CPU time of both). In the same run and on the same frames: the floor, the work no decoder
 of this design can avoid (threshold + connected components of both images, one batched
-classifier pass over all their patches, triangulation of the matched cells, the touch
+classifier pass over the patches the frame had to classify -- all of them with carry off,
+those not carried with carry on --, triangulation of the matched cells, the touch
 stage's two matrix-vector products), on one thread and with the two images' labelling in
 two threads, and total / floor (see docs/decoder.md, "Floor and total / floor").
 Each bag runs from its first frame in bag order, once per repetition, so labels are carried
@@ -122,7 +123,9 @@ class Floor:
 
     Per pair: the adaptive threshold (box mean minus offset, as the extractor's, without the
     opening) and connected components with statistics on both images, one batched classifier
-    pass over every glyph patch of both images, the triangulation (rectification + linear
+    pass over as many glyph patches as the frame had to classify (those whose label was not
+    carried from the previous frame; every glyph of both images with carry off), the
+    triangulation (rectification + linear
     least squares) of the cells both images decoded, and -- with touch outputs -- the touch
     stage's two matrix-vector products (resultant and normal pressure map,
     :meth:`~tactile_sl_decoder.touch.traction.TractionSolver.linear_products`).  ``serial``
@@ -163,6 +166,9 @@ class Floor:
         uv_l = np.column_stack([res.left.u, res.left.v]).astype(np.float64)[il[a]]
         uv_r = np.column_stack([res.right.u, res.right.v]).astype(np.float64)[ir[b]]
         classifier = self.pipe.load_classifier()
+        # exactly as many glyphs as this frame had to classify: those not carried from the
+        # previous frame (all of them with carry off or after a jump)
+        patches = patches[:max(len(patches) - res.carried, 0)]
         t0 = time.perf_counter()
         if self.pool is None:
             self._regions(left)

@@ -30,8 +30,10 @@ def image_to_array(msg: Any) -> np.ndarray:
         raise ImageFormatError(f"image step {step} is smaller than width*channels "
                                f"{width * channels}")
     data = msg.data
-    buffer = np.frombuffer(data if isinstance(data, (bytes, bytearray, memoryview))
-                           else bytes(data), dtype=np.uint8)
+    try:     # bytes, bytearray, array.array (rclpy's uint8[]), numpy: a view, no copy
+        buffer = np.frombuffer(memoryview(data).cast("B"), dtype=np.uint8)
+    except (TypeError, ValueError):    # a list of ints (a message built by hand)
+        buffer = np.frombuffer(bytes(data), dtype=np.uint8)
     if buffer.size < step * height:
         raise ImageFormatError(f"image data has {buffer.size} bytes, expected "
                                f"step*height = {step * height}")

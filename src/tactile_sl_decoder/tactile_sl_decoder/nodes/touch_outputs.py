@@ -168,8 +168,10 @@ class TouchOutputs:
         self.pub_pose = node.create_publisher(PoseStamped, "pad_pose", latched)
         self.tf = StaticTransformBroadcaster(node) if StaticTransformBroadcaster else None
         node.create_service(Trigger, "tare", self._on_tare)
-        # announce (and install) a reference prepared in the background as soon as it is done
+        # announce (and install) a reference prepared in the background as soon as it is done;
+        # the timer runs only while one is being prepared (no wake-ups otherwise)
         self._poll_timer = node.create_timer(0.05, self._poll_reference)
+        self._poll_timer.cancel()
         # stamp and camera frame of the frame that completed the reference (for pad_pose)
         self._reference_frame: tuple[tuple[int, int], str] = ((0, 0), "")
         e = sensor.elastomer
@@ -210,6 +212,7 @@ class TouchOutputs:
     def _poll_reference(self) -> None:
         """Timer: a reference finished in the background is installed and announced."""
         if not self.stage.preparing:
+            self._poll_timer.cancel()
             return
         try:
             if self.stage.poll():
@@ -251,6 +254,8 @@ class TouchOutputs:
         self._publish_caught_up()
         if result is not None:
             self._publish(result, stamp)
+        if self.stage.preparing and self._poll_timer.is_canceled():
+            self._poll_timer.reset()
 
     def _publish(self, result: Any, stamp: tuple[int, int]) -> None:
         """One frame's touch outputs, each built only while something subscribes to it."""
