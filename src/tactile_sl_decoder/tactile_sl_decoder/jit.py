@@ -17,7 +17,8 @@ import numba
 
 _KERNELS: list[Any] = []
 
-KERNEL_MODULES = ("tactile_sl_decoder.neighbours", "tactile_sl_decoder.extract.spacing")
+KERNEL_MODULES = ("tactile_sl_decoder.neighbours", "tactile_sl_decoder.extract.spacing",
+                  "tactile_sl_decoder.decode.links")
 """The modules that define kernels: importing them compiles (or loads) every kernel."""
 
 

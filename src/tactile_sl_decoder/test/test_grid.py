@@ -94,37 +94,6 @@ def test_tiny_inputs_give_no_links(n):
     assert np.all(np.delete(grid.nbr, 4, axis=1) == -1)
 
 
-@pytest.mark.parametrize("shear", [0.0, 0.3, 0.9])
-@pytest.mark.parametrize("seed", [0, 1])
-def test_fast_matching_equals_exhaustive_matching(seed, shear):
-    """Candidate matching via rounded lattice coordinates == the (N, 8, K) comparison."""
-    from tactile_sl_decoder.decode import grid as G
-
-    u, v, _, _ = _lattice(seed=seed, shear=shear, noise=2.0, spurious=0.1)
-    calls = {}
-
-    def exhaustive_only(du, dv, du32, dv32, valid, col_vec, row_vec, pred_u, pred_v, tol2,
-                        match_tol):
-        links, redo = real(du, dv, du32, dv32, valid, col_vec, row_vec, pred_u, pred_v,
-                           tol2, match_tol)
-        calls["redo"] = len(redo)
-        miss = ~valid
-        ref = G._match_exhaustive(np.where(miss, np.float32(1e6), du32),
-                                  np.where(miss, np.float32(1e6), dv32), pred_u, pred_v, tol2)
-        fast = links.copy()
-        fast[redo] = ref[redo]
-        calls["same"] = np.array_equal(fast, ref)
-        return links, redo
-
-    real = G._match_fast
-    G._match_fast = exhaustive_only
-    try:
-        build_grid(u, v)
-    finally:
-        G._match_fast = real
-    assert calls["same"]
-
-
 def test_precomputed_neighbours_give_the_same_grid():
     from tactile_sl_decoder.decode.grid import GridParams, nearest_neighbours
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from tactile_sl_decoder.decode.links import neighbour_table
 from tactile_sl_decoder.neighbours import knn_within
 
 # Offsets of the 3x3 neighbourhood, row-major: index 3 * (dr + 1) + (dc + 1).
@@ -213,14 +214,6 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
 
 
 NEIGHBOUR_SLOTS = np.array([o for o in range(9) if o != CENTRE])  # nbr columns of the 8 neighbours
-_REVERSE = 8 - NEIGHBOUR_SLOTS                    # the opposite neighbour's column
-_DIAG = np.array([0, 2, 6, 8])                    # (dr, dc) = (-1, -1), (-1, 1), (1, -1), (1, 1)
-_DIAG_VIA_ROW = 3 * (OFFSETS[_DIAG, 0] + 1) + 1   # column of (dr, 0)
-_DIAG_VIA_COL = 3 + OFFSETS[_DIAG, 1] + 1         # column of (0, dc)
-_DIAG_THEN_COL = _DIAG_VIA_COL
-_DIAG_THEN_ROW = _DIAG_VIA_ROW
-_ODC = OFFSETS[NEIGHBOUR_SLOTS, 1].astype(np.float64)  # (8,) column step of each neighbour
-_ODR = OFFSETS[NEIGHBOUR_SLOTS, 0].astype(np.float64)  # (8,) row step
 
 
 def _assign(du: np.ndarray, dv: np.ndarray, idx: np.ndarray, valid: np.ndarray,
@@ -228,117 +221,13 @@ def _assign(du: np.ndarray, dv: np.ndarray, idx: np.ndarray, valid: np.ndarray,
     """Neighbour table from local vectors, with mutual and diagonal consistency checks.
 
     Neighbour (dr, dc) of glyph i is the candidate closest to the predicted displacement
-    ``dc * col_vec + dr * row_vec``, if within ``match_tol`` local spacings.  Fast path: each
-    candidate's lattice coordinates, rounded, name the only prediction it can be within
-    tolerance of (exact while the local vectors are at least ~45 degrees apart, see
-    :func:`_match_fast`); glyphs where that does not hold, or where two candidates match the
-    same prediction, take the exhaustive (N, 8, K) comparison.  Same result either way.
+    ``dc * col_vec + dr * row_vec``, if within ``match_tol`` local spacings
+    (:func:`~tactile_sl_decoder.decode.links.neighbour_table`).
     """
-    n, kk = idx.shape
-    rows = np.arange(n)
-    local = np.minimum(np.hypot(col_vec[:, 0], col_vec[:, 1]),
-                       np.hypot(row_vec[:, 0], row_vec[:, 1]))
-    tol2 = (p.match_tol * local) ** 2
-    # Predicted displacement of every off-centre neighbour, (N, 8) per axis.
-    pred_u = (_ODC * col_vec[:, :1] + _ODR * row_vec[:, :1]).astype(np.float32)
-    pred_v = (_ODC * col_vec[:, 1:] + _ODR * row_vec[:, 1:]).astype(np.float32)
-    du32 = du.astype(np.float32)
-    dv32 = dv.astype(np.float32)
-    links, slow = _match_fast(du, dv, du32, dv32, valid, col_vec, row_vec, pred_u, pred_v,
-                              tol2, p.match_tol)
-    if len(slow):
-        miss = ~valid[slow]                       # missing: never within tolerance
-        links[slow] = _match_exhaustive(np.where(miss, np.float32(1e6), du32[slow]),
-                                        np.where(miss, np.float32(1e6), dv32[slow]),
-                                        pred_u[slow], pred_v[slow], tol2[slow])
-    found = idx.reshape(-1)[np.maximum(links, 0) + (rows * kk)[:, None]]
-    # Neighbour table with a sentinel row n (all -1): a missing link (-1) indexes it.
-    nbr = np.full((n + 1, 9), -1, dtype=np.int64)
-    nbr[:n, CENTRE] = rows
-    nbr[:n, NEIGHBOUR_SLOTS] = np.where(links >= 0, found, -1)
-    _mutual(nbr)
-    # Diagonals must agree with both two-step paths that exist (the four diagonals read
-    # only the 4-neighbour columns, which this step does not change: all at once).
-    d = nbr[:n, _DIAG]
-    path1 = nbr[nbr[:n, _DIAG_VIA_ROW], _DIAG_THEN_COL]     # (dr, 0) then (0, dc)
-    path2 = nbr[nbr[:n, _DIAG_VIA_COL], _DIAG_THEN_ROW]     # (0, dc) then (dr, 0)
-    bad = ((path1 >= 0) & (path1 != d)) | ((path2 >= 0) & (path2 != d))
-    nbr[:n, _DIAG] = np.where(bad, -1, d)
-    _mutual(nbr)
-    return nbr[:n]
-
-
-def _match_exhaustive(du32: np.ndarray, dv32: np.ndarray, pred_u: np.ndarray,
-                      pred_v: np.ndarray, tol2: np.ndarray) -> np.ndarray:
-    """k-NN column (M, 8) of the candidate nearest each prediction, -1 beyond tolerance."""
-    # Squared distances |disp - pred|^2, (M, 8, K), float32 elementwise (pixels: plenty).
-    err = np.subtract(du32[:, None, :], pred_u[:, :, None])
-    err *= err
-    tmp = np.subtract(dv32[:, None, :], pred_v[:, :, None])
-    tmp *= tmp
-    err += tmp
-    k = np.argmin(err, axis=2)                                          # (M, 8)
-    best = np.take_along_axis(err, k[..., None], axis=2)[..., 0]
-    return np.where(best < tol2[:, None], k, -1)
-
-
-def _match_fast(du: np.ndarray, dv: np.ndarray, du32: np.ndarray, dv32: np.ndarray,
-                valid: np.ndarray, col_vec: np.ndarray, row_vec: np.ndarray,
-                pred_u: np.ndarray, pred_v: np.ndarray, tol2: np.ndarray, match_tol: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Candidate matching through lattice coordinates; (links (N, 8), glyphs to redo).
-
-    A candidate within ``tol = match_tol * min(|c|, |r|)`` of the prediction ``(a, b)`` (in
-    steps of c = col_vec, r = row_vec) has lattice coordinates within ``tol / (min(|c|, |r|)
-    sin(angle(c, r)))`` of ``(a, b)`` per axis, i.e. below 0.5 when ``sin > 2 * match_tol``
-    (with margin): rounding its coordinates then names that prediction, and only it.  The
-    squared distance is computed exactly as in :func:`_match_exhaustive` (float32), so where
-    each prediction has at most one candidate within tolerance the links are identical.
-    """
-    n, kk = du.shape
-    c0, c1 = col_vec[:, 0:1], col_vec[:, 1:2]
-    r0, r1 = row_vec[:, 0:1], row_vec[:, 1:2]
-    det = c0 * r1 - c1 * r0                                       # (N, 1)
-    norm = np.hypot(c0, c1) * np.hypot(r0, r1)
-    good = np.abs(det[:, 0]) > (2.0 * match_tol + 0.05) * norm[:, 0]
-    inv = np.where(good[:, None], 1.0 / np.where(good[:, None], det, 1.0), 0.0)
-    # Lattice coordinates in float32: only their rounding matters, with a wide margin.
-    f32 = np.float32
-    inv = inv.astype(f32)
-    a = np.rint((du32 * r1.astype(f32) - dv32 * r0.astype(f32)) * inv)   # column steps
-    b = np.rint((dv32 * c0.astype(f32) - du32 * c1.astype(f32)) * inv)   # row steps
-    code = 3 * b + a + 4                                          # 3 * (dr + 1) + (dc + 1)
-    ok = valid & (np.abs(a) <= 1) & (np.abs(b) <= 1) & (code != CENTRE)
-    slot = np.where(ok, code - (code > CENTRE), 0).astype(np.intp)   # 0..7 (NEIGHBOUR_SLOTS order)
-    flat = slot + (np.arange(n) * 8)[:, None]
-    eu = du32 - pred_u.reshape(-1)[flat]
-    eu *= eu
-    ev = dv32 - pred_v.reshape(-1)[flat]
-    ev *= ev
-    eu += ev
-    ok &= eu < tol2[:, None]
-    hit_flat = flat[ok]
-    links = np.full(n * 8, -1, dtype=np.intp)
-    links[hit_flat] = np.nonzero(ok)[1]
-    # Two candidates within tolerance of one prediction: take the exhaustive path there.
-    clash = np.bincount(hit_flat, minlength=n * 8) > 1
-    redo = ~good
-    if clash.any():
-        redo |= clash.reshape(n, 8).any(axis=1)
-    return links.reshape(n, 8), np.flatnonzero(redo)
-
-
-def _mutual(nbr: np.ndarray) -> None:
-    """Keep only mutual links: j = nbr[i, o] requires nbr[j, 8 - o] == i (in place).
-
-    ``nbr`` has a sentinel last row of -1 (indexed by missing links).  All offsets at once:
-    the same as one offset after the other, since a link and its reverse are judged alike.
-    """
-    n = len(nbr) - 1
-    j = nbr[:n, NEIGHBOUR_SLOTS]
-    back = nbr[j, _REVERSE]                       # j = -1 reads the sentinel row
-    keep = back == np.arange(n)[:, None]
-    nbr[:n, NEIGHBOUR_SLOTS] = np.where(keep, j, -1)
+    return neighbour_table(np.ascontiguousarray(du), np.ascontiguousarray(dv),
+                           np.ascontiguousarray(idx, dtype=np.int64),
+                           np.ascontiguousarray(valid), np.ascontiguousarray(col_vec),
+                           np.ascontiguousarray(row_vec), float(p.match_tol))
 
 
 def window_indices(grid: Grid, window: tuple[int, int]) -> np.ndarray:

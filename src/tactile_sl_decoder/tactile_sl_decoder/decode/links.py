@@ -1,0 +1,145 @@
+"""The lattice's neighbour table from local lattice vectors (step 4-5 of decode/grid.py).
+
+Per glyph: each of its 8 neighbours is the candidate (one of its k nearest glyphs) closest
+to the displacement the local lattice vectors predict, within ``match_tol`` local spacings;
+then links must be mutual and diagonals agree with the two-step paths through the
+4-neighbours.  Compiled with numba (GIL released, one pass per glyph instead of a few dozen
+(N, K) numpy operations); the arithmetic is that of the numpy version it replaced, operation
+for operation (float32 where it was float32), so the table is the same (tests).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from tactile_sl_decoder.jit import helper, kernel
+
+# Neighbour slots 0..7 and their columns of the (N, 9) table (row-major 3x3, centre 4).
+_SLOT_COLUMN = np.array([0, 1, 2, 3, 5, 6, 7, 8], np.int64)
+_SLOT_DC = np.array([-1.0, 0.0, 1.0, -1.0, 1.0, -1.0, 0.0, 1.0])   # column step of a slot
+_SLOT_DR = np.array([-1.0, -1.0, -1.0, 0.0, 0.0, 1.0, 1.0, 1.0])   # row step of a slot
+_DIAGONALS = np.array([[0, 1, 3], [2, 1, 5], [6, 7, 3], [8, 7, 5]], np.int64)
+"""(diagonal column, the column of its (dr, 0) neighbour, the column of its (0, dc) one)."""
+
+
+@helper
+def _mutual(nbr: np.ndarray) -> None:
+    """Keep only mutual links: j = nbr[i, o] requires nbr[j, 8 - o] == i (in place)."""
+    n = nbr.shape[0]
+    before = nbr.copy()                     # every link judged on the table as it was
+    for i in range(n):
+        for o in range(9):
+            if o == 4:
+                continue
+            j = before[i, o]
+            if j >= 0 and before[j, 8 - o] != i:
+                nbr[i, o] = -1
+
+
+@helper
+def _match_one(du32: np.ndarray, dv32: np.ndarray, valid: np.ndarray, pred_u: np.ndarray,
+               pred_v: np.ndarray, tol2: float, c: np.ndarray, r: np.ndarray,
+               match_tol: float, links: np.ndarray) -> None:
+    """One glyph's 8 links (candidate index or -1) into ``links``.
+
+    Fast path: a candidate's lattice coordinates, rounded, name the only prediction it can
+    be within tolerance of; where the local vectors are too oblique or two candidates hit
+    one prediction, every prediction takes its nearest candidate (exhaustive).
+    """
+    kk = du32.shape[0]
+    f32 = np.float32
+    det = c[0] * r[1] - c[1] * r[0]
+    norm = np.hypot(c[0], c[1]) * np.hypot(r[0], r[1])
+    good = abs(det) > (2.0 * match_tol + 0.05) * norm
+    inv = f32(1.0 / det) if good else f32(0.0)
+    c0, c1, r0, r1 = f32(c[0]), f32(c[1]), f32(r[0]), f32(r[1])
+    for s in range(8):
+        links[s] = -1
+    hits = np.zeros(8, np.int64)
+    for k in range(kk):
+        if not valid[k]:
+            continue
+        a = np.rint((du32[k] * r1 - dv32[k] * r0) * inv)
+        b = np.rint((dv32[k] * c0 - du32[k] * c1) * inv)
+        code = f32(3.0) * b + a + f32(4.0)
+        if abs(a) > 1 or abs(b) > 1 or code == 4:
+            continue
+        slot = int(code) - (1 if code > 4 else 0)
+        eu = du32[k] - pred_u[slot]
+        eu *= eu
+        ev = dv32[k] - pred_v[slot]
+        ev *= ev
+        eu += ev
+        if eu < tol2:
+            links[slot] = k
+            hits[slot] += 1
+    clash = False
+    for s in range(8):
+        clash |= hits[s] > 1
+    if good and not clash:
+        return
+    far = f32(1e6)                                 # a missing candidate: never nearest
+    for s in range(8):
+        best = np.inf
+        at = 0
+        for k in range(kk):
+            x = du32[k] if valid[k] else far
+            y = dv32[k] if valid[k] else far
+            e = x - pred_u[s]
+            e *= e
+            t = y - pred_v[s]
+            t *= t
+            e += t
+            if e < best:
+                best = e
+                at = k
+        links[s] = at if best < tol2 else -1
+
+
+@kernel("int64[:, ::1](float64[:, ::1], float64[:, ::1], int64[:, ::1], boolean[:, ::1], "
+        "float64[:, ::1], float64[:, ::1], float64)")
+def neighbour_table(du: np.ndarray, dv: np.ndarray, idx: np.ndarray, valid: np.ndarray,
+                    col_vec: np.ndarray, row_vec: np.ndarray, match_tol: float) -> np.ndarray:
+    """(N, 9) neighbour table: candidate matching, mutual links, diagonal consistency.
+
+    ``du``, ``dv`` (N, K): displacements to each glyph's k nearest glyphs ``idx`` (those not
+    ``valid`` are missing); ``col_vec``, ``row_vec`` (N, 2): local lattice vectors.
+    """
+    n, kk = du.shape
+    nbr = np.full((n, 9), -1, np.int64)
+    links = np.empty(8, np.int64)
+    pred_u = np.empty(8, np.float32)
+    pred_v = np.empty(8, np.float32)
+    du32 = np.empty(kk, np.float32)
+    dv32 = np.empty(kk, np.float32)
+    for i in range(n):
+        c = col_vec[i]
+        r = row_vec[i]
+        local = min(np.hypot(c[0], c[1]), np.hypot(r[0], r[1]))
+        t = match_tol * local
+        tol2 = t * t
+        for s in range(8):
+            pred_u[s] = np.float32(_SLOT_DC[s] * c[0] + _SLOT_DR[s] * r[0])
+            pred_v[s] = np.float32(_SLOT_DC[s] * c[1] + _SLOT_DR[s] * r[1])
+        for k in range(kk):
+            du32[k] = np.float32(du[i, k])
+            dv32[k] = np.float32(dv[i, k])
+        _match_one(du32, dv32, valid[i], pred_u, pred_v, tol2, c, r, match_tol, links)
+        nbr[i, 4] = i
+        for s in range(8):
+            if links[s] >= 0:
+                nbr[i, _SLOT_COLUMN[s]] = idx[i, links[s]]
+    _mutual(nbr)
+    # Diagonals must agree with both two-step paths that exist (they read only the
+    # 4-neighbour columns, which this step leaves alone).
+    for i in range(n):
+        for q in range(4):
+            diag, via_row, via_col = _DIAGONALS[q]
+            d = nbr[i, diag]
+            j = nbr[i, via_row]
+            path1 = nbr[j, via_col] if j >= 0 else -1     # (dr, 0) then (0, dc)
+            j = nbr[i, via_col]
+            path2 = nbr[j, via_row] if j >= 0 else -1     # (0, dc) then (dr, 0)
+            if (path1 >= 0 and path1 != d) or (path2 >= 0 and path2 != d):
+                nbr[i, diag] = -1
+    _mutual(nbr)
+    return nbr
