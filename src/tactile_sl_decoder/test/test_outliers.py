@@ -3,7 +3,13 @@
 import numpy as np
 import pytest
 
-from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
+from tactile_sl_decoder.stereo.outliers import (
+    DIRECTIONS,
+    OutlierParams,
+    _shift,
+    surface_outliers,
+    surface_residuals,
+)
 
 from ros_harness import REPO
 
@@ -81,3 +87,34 @@ def test_robustness_bags_decode_without_wrong_cells(name):
     assert total.wrong == 0
     assert total.coverage >= 0.98          # damaged glyphs included in the bag's truth
     assert total.rmse_m <= 0.015e-3
+
+
+def _residuals_reference(grid):
+    """The numpy version surface_residuals replaced (kept as the reference)."""
+    centre = _shift(grid, 0, 0)
+    best = np.full(centre.shape[:2], np.inf)
+    one_sided = np.full(centre.shape[:2], np.inf)
+    for dr, dc in DIRECTIONS:
+        a1, b1 = _shift(grid, -dr, -dc), _shift(grid, dr, dc)
+        a2, b2 = _shift(grid, -2 * dr, -2 * dc), _shift(grid, 2 * dr, 2 * dc)
+        pred4 = (4.0 * (a1 + b1) - a2 - b2) / 6.0
+        pred2 = 0.5 * (a1 + b1)
+        pred = np.where(np.isfinite(pred4), pred4, pred2)
+        best = np.fmin(best, np.linalg.norm(centre - pred, axis=-1))
+        for p1, p2 in ((a1, a2), (b1, b2)):
+            one_sided = np.fmin(one_sided, np.linalg.norm(centre - (2.0 * p1 - p2), axis=-1))
+    res = np.where(np.isfinite(best), best, one_sided)
+    return np.where(np.isfinite(res) & np.isfinite(centre[..., 0]), res, np.nan)
+
+
+@pytest.mark.parametrize("seed,holes", [(0, 0.0), (1, 0.2), (2, 0.7)])
+def test_residuals_equal_the_numpy_reference_bit_for_bit(seed, holes):
+    rng = np.random.default_rng(seed)
+    grid = np.full((30 + 4, 28 + 4, 3), np.nan)
+    r, c = np.mgrid[0:30, 0:28]
+    pts = np.stack([c * 5e-4, r * 5e-4, 0.015 + 1e-4 * np.sin(c / 4.0) * np.cos(r / 5.0)], -1)
+    pts += rng.normal(0, 2e-6, pts.shape)
+    pts[rng.random((30, 28)) < holes] = np.nan
+    pts[3, 4] += (0, 0, 3e-4)                      # an outlier
+    grid[2:-2, 2:-2] = pts
+    assert np.array_equal(surface_residuals(grid), _residuals_reference(grid), equal_nan=True)

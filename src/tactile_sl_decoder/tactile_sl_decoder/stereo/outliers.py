@@ -19,7 +19,7 @@ level, so noisy images are not thinned out).  Each pass drops only the worst poi
 the grid and tests again (``passes``), so a cluster of bad points does not shield itself and
 its good neighbours are not dropped with it.
 
-All of it is numpy on the (rows, cols) cell grid: no loop over points.  No rclpy.
+All of it works on the (rows, cols) cell grid (numpy; the residuals in numba).  No rclpy.
 """
 from __future__ import annotations
 
@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import maximum_filter
+
+from tactile_sl_decoder.jit import helper, kernel
 
 DIRECTIONS = ((0, 1), (1, 0), (1, 1), (1, -1))
 PAD = 2
@@ -49,26 +51,60 @@ def _shift(grid: np.ndarray, dr: int, dc: int) -> np.ndarray:
     return grid[PAD + dr:PAD + dr + rows, PAD + dc:PAD + dc + cols]
 
 
+@helper
+def _distance(centre: np.ndarray, pred: np.ndarray) -> float:
+    """|centre - pred| as numpy's norm over the last axis sums it: (x^2 + y^2) + z^2."""
+    dx = centre[0] - pred[0]
+    dy = centre[1] - pred[1]
+    dz = centre[2] - pred[2]
+    return np.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@kernel("float64[:, ::1](float64[:, :, ::1])")
 def surface_residuals(grid: np.ndarray) -> np.ndarray:
     """Smallest distance (m) of each cell's point from its neighbours' predictions.
 
     ``grid``: (rows + 4, cols + 4, 3) points with NaN where no point (two cells of NaN
-    padding).  Returns (rows, cols); NaN where no point or no prediction.
+    padding).  Returns (rows, cols); NaN where no point or no prediction.  Per direction the
+    fourth-order stencil where all four neighbours exist, else the two-neighbour mean; the
+    one-sided extrapolations only where no direction has either (numba, the arithmetic of
+    the numpy expressions it replaced, in their order).
     """
-    centre = _shift(grid, 0, 0)
-    best = np.full(centre.shape[:2], np.inf)
-    one_sided = np.full(centre.shape[:2], np.inf)
-    for dr, dc in DIRECTIONS:
-        a1, b1 = _shift(grid, -dr, -dc), _shift(grid, dr, dc)
-        a2, b2 = _shift(grid, -2 * dr, -2 * dc), _shift(grid, 2 * dr, 2 * dc)
-        pred4 = (4.0 * (a1 + b1) - a2 - b2) / 6.0
-        pred2 = 0.5 * (a1 + b1)
-        pred = np.where(np.isfinite(pred4), pred4, pred2)
-        best = np.fmin(best, np.linalg.norm(centre - pred, axis=-1))
-        for p1, p2 in ((a1, a2), (b1, b2)):
-            one_sided = np.fmin(one_sided, np.linalg.norm(centre - (2.0 * p1 - p2), axis=-1))
-    res = np.where(np.isfinite(best), best, one_sided)
-    return np.where(np.isfinite(res) & np.isfinite(centre[..., 0]), res, np.nan)
+    rows, cols = grid.shape[0] - 2 * PAD, grid.shape[1] - 2 * PAD
+    out = np.full((rows, cols), np.nan)
+    pred = np.empty(3)
+    for r in range(rows):
+        for c in range(cols):
+            centre = grid[r + PAD, c + PAD]
+            if not np.isfinite(centre[0]):
+                continue
+            best = np.inf
+            one_sided = np.inf
+            for dr, dc in DIRECTIONS:
+                a1 = grid[r + PAD - dr, c + PAD - dc]
+                b1 = grid[r + PAD + dr, c + PAD + dc]
+                a2 = grid[r + PAD - 2 * dr, c + PAD - 2 * dc]
+                b2 = grid[r + PAD + 2 * dr, c + PAD + 2 * dc]
+                for k in range(3):
+                    p4 = (4.0 * (a1[k] + b1[k]) - a2[k] - b2[k]) / 6.0
+                    pred[k] = p4 if np.isfinite(p4) else 0.5 * (a1[k] + b1[k])
+                d = _distance(centre, pred)
+                if not np.isnan(d) and d < best:      # np.fmin: a NaN never wins
+                    best = d
+                for k in range(3):
+                    pred[k] = 2.0 * a1[k] - a2[k]
+                d = _distance(centre, pred)
+                if not np.isnan(d) and d < one_sided:
+                    one_sided = d
+                for k in range(3):
+                    pred[k] = 2.0 * b1[k] - b2[k]
+                d = _distance(centre, pred)
+                if not np.isnan(d) and d < one_sided:
+                    one_sided = d
+            res = best if np.isfinite(best) else one_sided
+            if np.isfinite(res):
+                out[r, c] = res
+    return out
 
 
 def surface_outliers(xyz: np.ndarray, row: np.ndarray, col: np.ndarray,
