@@ -46,6 +46,10 @@ except ImportError:
     StaticTransformBroadcaster = None
 
 
+CATCH_UP_BURST = 3
+"""Frames of a reference's backlog published per wake-up (see _publish_caught_up)."""
+
+
 def _hysteresis(values: dict[str, Any]) -> str | None:
     on, off = values.get("contact_force_on"), values.get("contact_force_off")
     if on is not None and off is not None and off > on:
@@ -211,19 +215,24 @@ class TouchOutputs:
 
     def _poll_reference(self) -> None:
         """Timer: a reference finished in the background is installed and announced."""
-        if not self.stage.preparing:
-            self._poll_timer.cancel()
-            return
-        try:
-            if self.stage.poll():
-                self._announce_reference(*self._reference_frame)
-        except ReferenceError as exc:
-            self._unusable(exc)
+        if self.stage.preparing:
+            try:
+                if self.stage.poll():
+                    self._announce_reference(*self._reference_frame)
+            except ReferenceError as exc:
+                self._unusable(exc)
         self._publish_caught_up()
+        if not self.stage.preparing and not self.stage.caught_up:
+            self._poll_timer.cancel()
 
     def _publish_caught_up(self) -> None:
-        """Outputs of the frames that waited for the reference (in their order)."""
-        for stamp, result in self.stage.drain():
+        """Outputs of frames that waited for the reference, oldest first, a few at a time.
+
+        The backlog of a reference's preparation (a second's frames) goes out at most
+        ``CATCH_UP_BURST`` frames per wake-up (each frame and the 20 Hz timer), so that a
+        subscriber's queue (depth 10 is common) does not overflow and lose the oldest.
+        """
+        for stamp, result in self.stage.drain(CATCH_UP_BURST):
             self._publish(result, stamp)
 
     def _unusable(self, exc: ReferenceError) -> None:
@@ -254,7 +263,7 @@ class TouchOutputs:
         self._publish_caught_up()
         if result is not None:
             self._publish(result, stamp)
-        if self.stage.preparing and self._poll_timer.is_canceled():
+        if (self.stage.preparing or self.stage.caught_up) and self._poll_timer.is_canceled():
             self._poll_timer.reset()
 
     def _publish(self, result: Any, stamp: tuple[int, int]) -> None:

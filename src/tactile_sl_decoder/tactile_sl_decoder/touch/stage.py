@@ -220,15 +220,21 @@ class TouchStage:
             if result is not None:
                 self._caught_up.append((tag, result))
 
-    def drain(self) -> list[tuple[Any, TouchResult]]:
+    def drain(self, limit: int | None = None) -> list[tuple[Any, TouchResult]]:
         """(tag, outputs) of frames that waited for a reference prepared in the background.
 
         Filled when the reference is installed (:meth:`poll`, also called by
-        :meth:`update`); a caller publishes these before the outputs of the frame it passed
-        to :meth:`update`, which keeps the frames in order.
+        :meth:`update`), oldest first; at most ``limit`` of them per call (a node publishes
+        the backlog a few frames per wake-up, so that no subscriber's queue overflows).
         """
-        out, self._caught_up = self._caught_up, []
+        count = len(self._caught_up) if limit is None else max(0, int(limit))
+        out, self._caught_up = self._caught_up[:count], self._caught_up[count:]
         return out
+
+    @property
+    def caught_up(self) -> int:
+        """Frames with outputs not yet handed out by :meth:`drain`."""
+        return len(self._caught_up)
 
     @property
     def pending(self) -> int:
