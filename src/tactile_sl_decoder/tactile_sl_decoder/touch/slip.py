@@ -1,0 +1,421 @@
+"""Slip: how close the contact pressing hardest is to sliding, from its displacement field.
+
+Under a tangential load Q rising at constant normal load P, a Hertz contact of radius a
+sticks in a central disc of radius c and slides in the annulus around it, with
+c / a = (1 - |Q| / (mu P))^(1/3) (Cattaneo-Mindlin; K.L. Johnson, Contact Mechanics, 1985,
+section 7.2), until it slides as a whole at |Q| = mu P (gross slip).  Mindlin's tangential
+traction is mu p0 / a [sqrt(a^2 - r^2) - sqrt(c^2 - r^2)] (the second term inside c only):
+two Hertz-shaped terms, so the displacement field of the contact is
+
+    u = alpha R_a + beta (T_a - (c/a) T_c)
+
+with R_s, T_s the pad's responses to a unit-peak Hertz pressure and tangential traction of
+radius s (:mod:`.hertz_response`, the same elastic model the traction inversion uses),
+alpha = -p0 (pressing) and beta = mu p0 along the slip direction.  The stick disc moves
+rigidly (the two terms' curvatures cancel inside c) and the annulus lags behind it: that
+shape, sampled at every decoded cell with a known material identity, tells c / a.
+
+Estimate, per frame (no rclpy):
+
+1. the contact pressing hardest (the contact state's first region): its centre and a first
+   radius sqrt(area / pi); the decoded cells within ``window`` radii of the centre;
+2. its tangential direction: a least-squares fit of a pressure and two tangential
+   (x, y) Hertz terms at the first radius; a tangential amplitude below
+   ``tangential_fraction`` of the normal one means no tangential load (stick, margin 1);
+3. a and c on a grid of radii (``radius_step`` pitches apart): for every pair c <= a the
+   two amplitudes (alpha, beta) by weighted linear least squares (Gram matrices of all
+   terms, so the whole grid costs one matrix product), the pair of least residual,
+   refined by a parabola through the residuals of its neighbours along c and along a;
+4. stick ratio (c/a)^2, slip margin (c/a)^3 = 1 - |Q|/(mu P), Q/P = beta (1 - (c/a)^3) /
+   p0 (the fitted tractions' sums), mu = (Q/P) / (1 - (c/a)^3) once a slip annulus is seen
+   (stick ratio <= ``slip_seen``), gross slip when the margin is <= ``gross_margin``.
+
+Where it stops being valid (docs/slip.md): non-spherical contacts (a flat punch's or a
+cylinder's pressure is not Hertzian), torsion (a twist adds a circumferential traction),
+several contacts (the others' fields leak into the window; the strongest is still measured,
+less accurately), unloading and reversals of Q (Mindlin-Deresiewicz: the traction then
+depends on the loading history, which a single frame does not show), and normal loads
+changing while Q rises.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tactile_sl_camera.elasticity import Elastomer
+from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_NO_CONTACT, SLIP_PARTIAL, SLIP_STICK
+from tactile_sl_decoder.touch.contact import ContactState
+from tactile_sl_decoder.touch.hertz_response import HertzResponse, hertz_response
+
+STATE_NAMES = {SLIP_NO_CONTACT: "none", SLIP_STICK: "stick", SLIP_PARTIAL: "partial",
+               SLIP_GROSS: "gross"}
+NAN = float("nan")
+HERTZ_FORCE = 2.0 * math.pi / 3.0   # integral of sqrt(1 - r^2/a^2) over the disc, over a^2
+
+
+@dataclass
+class SlipParams:
+    """Settings of the slip estimate (lengths in pitches or contact radii, as named)."""
+
+    window: float = 1.3            # fit cells within this x the first contact radius
+    radius_range: tuple[float, float] = (0.7, 1.3)   # a candidates, x the first radius
+    radius_step: float = 0.25      # pitches between table radii ...
+    radii_per_contact: float = 12.0  # ... of which every n-th is a candidate, n such that
+                                     # about this many fit in the first contact radius
+    max_radius: float = 16.0       # pitches: largest contact radius measured
+    tangential_fraction: float = 0.02   # |Q| / P below this: no tangential load
+    slip_seen: float = 0.8         # stick ratio at or below which the slip annulus is seen
+    gross_margin: float = 0.05     # slip margin at or below which the contact slides
+    noise_tangential: float = 1e-6  # m, displacement noise in x, y (least-squares weight)
+    noise_normal: float = 3e-6     # m, displacement noise in z
+    min_cells: int = 12            # fewer decoded cells in the window: not measured
+    max_cells: int = 320           # more: every other cell (checkerboard) is fitted
+
+    def validate(self) -> "SlipParams":
+        """Raise ValueError for values outside their ranges."""
+        lo, hi = self.radius_range
+        if not 0 < lo < 1 < hi:
+            raise ValueError(f"radius_range must be (lo, hi) with 0 < lo < 1 < hi, got "
+                             f"{self.radius_range}")
+        if not 1 < self.window <= 4:
+            raise ValueError(f"window must be in (1, 4], got {self.window}")
+        if not 0.05 <= self.radius_step <= 1:
+            raise ValueError(f"radius_step must be in [0.05, 1] pitches, got "
+                             f"{self.radius_step}")
+        if not 4 <= self.radii_per_contact <= 64:
+            raise ValueError(f"radii_per_contact must be in [4, 64], got "
+                             f"{self.radii_per_contact}")
+        if not 1 < self.max_radius <= 64:
+            raise ValueError(f"max_radius must be in (1, 64] pitches, got {self.max_radius}")
+        if not 0 < self.tangential_fraction < 1:
+            raise ValueError("tangential_fraction must be in (0, 1)")
+        if not 0 < self.slip_seen < 1 or not 0 <= self.gross_margin < 1:
+            raise ValueError("slip_seen must be in (0, 1) and gross_margin in [0, 1)")
+        if self.noise_tangential <= 0 or self.noise_normal <= 0:
+            raise ValueError("noise_tangential and noise_normal must be > 0")
+        if self.min_cells < 4:
+            raise ValueError(f"min_cells must be >= 4, got {self.min_cells}")
+        if self.max_cells < 2 * self.min_cells:
+            raise ValueError(f"max_cells must be >= 2 min_cells, got {self.max_cells}")
+        return self
+
+
+@dataclass
+class SlipEstimate:
+    """The contract's Slip message (pad frame, SI) plus what the estimate saw."""
+
+    state: int = SLIP_NO_CONTACT
+    stick_ratio: float = NAN
+    margin: float = NAN
+    friction: float = NAN
+    direction: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    centroid: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    contact_radius: float = NAN     # m, a
+    stick_radius: float = NAN       # m, c
+    normal_force: float = NAN       # N, P of the fitted pressure
+    tangential_force: float = NAN   # N, |Q| of the fitted tangential traction
+    fit_residual: float = NAN       # m, RMS of the fit's residual over the window's cells
+    cells: int = 0                  # decoded cells in the window
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def state_name(self) -> str:
+        return STATE_NAMES.get(self.state, str(self.state))
+
+
+def _parabola(r_minus: float, r0: float, r_plus: float) -> float:
+    """Offset (-1..1 steps) of the vertex of the parabola through three residuals."""
+    den = r_minus - 2.0 * r0 + r_plus
+    if not math.isfinite(den) or den <= 0:
+        return 0.0
+    return float(np.clip(0.5 * (r_minus - r_plus) / den, -1.0, 1.0))
+
+
+_DI, _DJ = (v.ravel() for v in np.mgrid[-1:2, -1:2])
+_QUADRIC = np.column_stack([np.ones(9), _DI, _DJ, _DI ** 2, _DJ ** 2, _DI * _DJ])
+_QUADRIC_PINV = np.linalg.pinv(_QUADRIC)
+
+
+def _refine(grid: np.ndarray, i: int, j: int, i_lo: int, i_hi: int) -> tuple[float, float]:
+    """Sub-step offsets (di, dj) of the residual's minimum around grid pair (i, j).
+
+    A quadric fitted by least squares to the 3 x 3 neighbourhood (the residual is even in c,
+    so c = -1 step mirrors c = 1 step; rows outside the a candidates are left out): its
+    stationary point when it is a minimum within one step; otherwise a parabola along c.
+    """
+    rows = i + _DI
+    cols = np.abs(j + _DJ)
+    ok = (rows >= i_lo) & (rows <= i_hi) & (cols < grid.shape[1])
+    z = np.full(9, np.inf)
+    z[ok] = grid[rows[ok], cols[ok]]
+    ok &= np.isfinite(z)
+    if ok.all() or ok.sum() >= 7:
+        coef = (_QUADRIC_PINV @ (z - z[4]) if ok.all()
+                else np.linalg.lstsq(_QUADRIC[ok], z[ok] - z[4], rcond=None)[0])
+        h = np.array([[2 * coef[3], coef[5]], [coef[5], 2 * coef[4]]])
+        if h[0, 0] > 0 and np.linalg.det(h) > 0:
+            d = -np.linalg.solve(h, coef[1:3])
+            if np.all(np.abs(d) <= 1.0):
+                return float(d[0]), float(d[1])
+    dj = _parabola(z[3], z[4], z[5]) if np.isfinite(z[3]) and np.isfinite(z[5]) else 0.0
+    return 0.0, dj
+
+
+class SlipEstimator:
+    """Slip of the contact pressing hardest, per frame, for one elastomer and pitch."""
+
+    def __init__(self, elastomer: Elastomer, pitch: float,
+                 params: SlipParams | None = None) -> None:
+        self.params = (params or SlipParams()).validate()
+        self.pitch = float(pitch)
+        p = self.params
+        step = p.radius_step * self.pitch
+        max_radius = p.max_radius * self.pitch
+        self.response: HertzResponse = hertz_response(
+            elastomer, step, max_radius * p.radius_range[1], max_radius * p.window)
+        w = np.array([1.0 / p.noise_tangential, 1.0 / p.noise_tangential, 1.0 / p.noise_normal])
+        self._weights = w * p.noise_tangential   # relative: the x, y weights are 1
+        self._pairs: dict[tuple[int, int], tuple[np.ndarray, ...]] = {}
+
+    # ------------------------------------------------------------------ bases
+
+    def _angles(self, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, ...]:
+        """cos, sin, cos 2, sin 2 of every cell's angle around the centre."""
+        safe = np.where(r > 0, r, 1.0)
+        cos = np.where(r > 0, d[:, 0] / safe, 1.0)
+        sin = np.where(r > 0, d[:, 1] / safe, 0.0)
+        return cos, sin, cos * cos - sin * sin, 2.0 * sin * cos
+
+    def _pressure(self, f: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
+        """Weighted responses (n, 3M) to unit-peak Hertz pressures (traction q_z = +w)."""
+        C, D = f[:, 2], f[:, 3]
+        out = np.empty((f.shape[0], f.shape[2], 3))
+        out[..., 0] = C * cos
+        out[..., 1] = C * sin
+        out[..., 2] = D * self._weights[2]
+        return out.reshape(f.shape[0], -1)
+
+    def _tangential(self, f: np.ndarray, e: np.ndarray, angles: tuple[np.ndarray, ...]
+                    ) -> np.ndarray:
+        """Weighted responses (n, 3M) to unit-peak Hertz tractions along the unit ``e``.
+
+        e_x (A - B cos 2, -B sin 2, -C cos) + e_y (-B sin 2, A + B cos 2, -C sin).
+        """
+        cos, sin, cos2, sin2 = angles
+        A, B, C = f[:, 0], f[:, 1], f[:, 2]
+        out = np.empty((f.shape[0], f.shape[2], 3))
+        out[..., 0] = e[0] * A - B * (e[0] * cos2 + e[1] * sin2)
+        out[..., 1] = e[1] * A - B * (e[0] * sin2 - e[1] * cos2)
+        out[..., 2] = C * (-self._weights[2] * (e[0] * cos + e[1] * sin))
+        return out.reshape(f.shape[0], -1)
+
+    # ------------------------------------------------------------------ estimate
+
+    def estimate(self, rest_xy: np.ndarray, displacement: np.ndarray,
+                 contact: ContactState) -> SlipEstimate:
+        """Slip of the contact pressing hardest, from the decoded cells of one frame.
+
+        ``rest_xy`` (M, 2) rest positions and ``displacement`` (M, 3) of the decoded cells
+        (pad frame, m); ``contact`` the frame's contact state (its first region is the
+        contact pressing hardest).  Never raises on a frame's data: no contact gives
+        ``SLIP_NO_CONTACT`` with NaN, a contact with too few decoded cells around it (e.g.
+        mostly off the pad) gives ``SLIP_STICK`` with NaN margin and stick ratio.
+        """
+        if not contact.in_contact or not contact.region_force:
+            return SlipEstimate()
+        p = self.params
+        centre = np.asarray(contact.region_centroid[0][:2], np.float64)
+        first = max(math.sqrt(max(float(contact.region_area[0]), 0.0) / math.pi),
+                    2 * self.response.step)
+        out = SlipEstimate(state=SLIP_STICK, centroid=(float(centre[0]), float(centre[1]), 0.0))
+        # candidate radii: every stride-th table radius, about radii_per_contact per radius
+        stride = max(1, round(first / (p.radii_per_contact * self.response.step)))
+        step = stride * self.response.step
+        n_max = (self.response.tables.shape[0] - 1) // stride + 1
+        i_lo = max(2, int(math.floor(p.radius_range[0] * first / step)))
+        i_hi = min(n_max - 2, int(math.ceil(p.radius_range[1] * first / step)))
+        reach = min(p.window * first, self.response.max_distance)
+        rest = np.asarray(rest_xy, np.float64)
+        d = rest - centre
+        good = (np.einsum("ij,ij->i", d, d) < reach * reach) & np.isfinite(displacement).all(1)
+        out.cells = int(good.sum())
+        if out.cells < p.min_cells or i_hi <= i_lo:
+            return out
+        if out.cells > p.max_cells:   # a large contact: half its cells carry the information
+            lattice = np.rint(rest / self.pitch).astype(np.int64)
+            good &= (lattice[:, 0] + lattice[:, 1]) % 2 == 0
+        rest = rest[good]
+        u = (np.asarray(displacement, np.float64)[good] * self._weights).ravel()
+        # 2. centre and direction: pressure + tangential x, y at the first radius
+        i_first = int(np.clip(round(first / step), i_lo, i_hi))
+        first_table = np.array([stride * i_first])
+        fitted = self._first_fit(rest, centre, u, first_table)
+        if fitted is None:
+            return out
+        centre, coef, x3 = fitted
+        out.centroid = (float(centre[0]), float(centre[1]), 0.0)
+        alpha0, beta0 = float(coef[0]), coef[1:3]
+        q_over_p = float(np.hypot(*beta0)) / max(-alpha0, 1e-300)
+        if not alpha0 < 0 or not math.isfinite(q_over_p):
+            return out                              # no pressing Hertz contact to fit
+        d = rest - centre
+        r = np.sqrt(np.einsum("ij,ij->i", d, d))
+        f = self.response.sample(r, stride * np.arange(i_hi + 2))    # (i_hi + 2, 4, M)
+        angles = self._angles(d, r)
+        pressure = self._pressure(f[i_lo:i_hi + 1], *angles[:2])
+        if q_over_p < p.tangential_fraction:
+            return self._normal_only(out, u, pressure, i_lo, step)
+        e = beta0 / np.hypot(*beta0)
+        x = np.concatenate([pressure, self._tangential(f, e, angles)])  # P_lo..hi, T_0..hi+1
+        return self._fit(out, u, x, e, i_lo, i_hi, step)
+
+    def _first_fit(self, rest: np.ndarray, centre: np.ndarray, u: np.ndarray,
+                   table: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Centre, (alpha, beta_x, beta_y) and the bases (at the first centre) at one radius.
+
+        The contact state's centroid comes from the traction map, which a tangential load
+        shifts (on a thin layer by a tenth of a millimetre), so the centre is refined with
+        the fit: one Gauss-Newton step on the centre and the amplitudes, the model's
+        derivatives by forward differences.
+        """
+        h = 0.05 * self.pitch
+        x3 = self._three(rest - centre, table)
+        try:
+            coef = np.linalg.solve(x3 @ x3.T, x3 @ u)
+            if coef[0] < 0:
+                model = coef @ x3
+                grads = [(coef @ self._three(rest - centre - h * ax, table) - model) / h
+                         for ax in (np.array([1.0, 0.0]), np.array([0.0, 1.0]))]
+                jac = np.concatenate([x3, np.stack(grads)])
+                step = np.linalg.solve(jac @ jac.T, jac @ u)
+                centre = centre + np.clip(step[3:], -self.pitch, self.pitch)
+                coef = step[:3]
+        except np.linalg.LinAlgError:
+            return None
+        return centre, coef, x3
+
+    def _three(self, d: np.ndarray, table: np.ndarray) -> np.ndarray:
+        """Weighted pressure, x- and y-tangential responses (3, 3M) of one table radius."""
+        r = np.sqrt(np.einsum("ij,ij->i", d, d))
+        f = self.response.sample(r, table)[0]
+        A, B, C, D = f
+        cos, sin, cos2, sin2 = self._angles(d, r)
+        wz = self._weights[2]
+        out = np.empty((3, len(r), 3))
+        out[0, :, 0], out[0, :, 1], out[0, :, 2] = C * cos, C * sin, wz * D
+        out[1, :, 0], out[1, :, 1], out[1, :, 2] = A - B * cos2, -B * sin2, -wz * C * cos
+        out[2, :, 0], out[2, :, 1], out[2, :, 2] = -B * sin2, A + B * cos2, -wz * C * sin
+        return out.reshape(3, -1)
+
+    def _normal_only(self, out: SlipEstimate, u: np.ndarray, pressure: np.ndarray,
+                     i_lo: int, step: float) -> SlipEstimate:
+        """No tangential load: stick, margin 1; the contact radius from the pressure alone."""
+        pu = pressure @ u
+        pp = np.einsum("ij,ij->i", pressure, pressure)
+        res = np.where(pu < 0, float(u @ u) - pu * pu / pp, np.inf)
+        best = int(np.argmin(res))
+        if not math.isfinite(float(res[best])):
+            return out
+        di = 0.0
+        if 0 < best < len(res) - 1:
+            di = _parabola(float(res[best - 1]), float(res[best]), float(res[best + 1]))
+        a = (i_lo + best + di) * step
+        alpha = float(pu[best] / pp[best])
+        out.stick_ratio, out.margin = 1.0, 1.0
+        out.contact_radius = out.stick_radius = a
+        out.normal_force = HERTZ_FORCE * a * a * -alpha
+        out.tangential_force = 0.0
+        out.fit_residual = self._rms(u, pressure[best:best + 1], np.array([alpha]))
+        return out
+
+    def _fit(self, out: SlipEstimate, u: np.ndarray, x: np.ndarray, e: np.ndarray,
+             i_lo: int, i_hi: int, step: float) -> SlipEstimate:
+        """3.-4.: the (a, c) grid, its refinement and the figures of the best pair.
+
+        ``x`` holds the weighted pressure responses of radii ``i_lo`` .. ``i_hi``, then the
+        tangential ones (along ``e``) of radii 0 .. ``i_hi`` + 1 (``step`` m apart; c may
+        exceed a by one step, so that a stick disc filling the contact has a minimum to
+        refine; c is then clamped to a).
+        """
+        p = self.params
+        na = i_hi - i_lo + 1
+        gram = x @ x.T
+        xu = x @ u
+        uu = float(u @ u)
+        ia, jc, rows, w, force_share = self._pair_terms(i_lo, i_hi)
+        pp = ia - i_lo                           # rows of x: pressure of a
+        t = na + rows                            # rows of x: tangential terms
+        a11 = gram[pp, pp]
+        a12 = np.einsum("mp,mp->p", w, gram[pp, t])
+        a22 = np.einsum("mp,np,mnp->p", w, w, gram[t[:, None], t[None, :]])
+        b1 = xu[pp]
+        b2 = np.einsum("mp,mp->p", w, xu[t])
+        det = a11 * a22 - a12 * a12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            alpha = (a22 * b1 - a12 * b2) / det
+            beta = (a11 * b2 - a12 * b1) / det
+            res = uu - (alpha * b1 + beta * b2)
+        res = np.where((det > 1e-12 * a11 * np.maximum(a22, 1e-300)) & np.isfinite(res),
+                       res, np.inf)
+        best = int(np.argmin(res))
+        if not math.isfinite(float(res[best])) or not alpha[best] < 0:
+            return out
+        grid = np.full((i_hi + 1, i_hi + 2), np.inf)
+        grid[ia, jc] = res
+        i, j = int(ia[best]), int(jc[best])
+        di, dj = _refine(grid, i, j, i_lo, i_hi)
+        a = (i + di) * step
+        c = min(max((j + dj) * step, 0.0), a)
+        ratio = c / a
+        p0 = -float(alpha[best])
+        q_over_p = float(beta[best]) * float(force_share[best]) / p0
+        out.contact_radius, out.stick_radius = a, c
+        out.stick_ratio, out.margin = ratio * ratio, ratio ** 3
+        out.normal_force = HERTZ_FORCE * a * a * p0
+        out.tangential_force = abs(q_over_p) * out.normal_force
+        sign = 1.0 if q_over_p >= 0 else -1.0
+        out.direction = (float(sign * e[0]), float(sign * e[1]), 0.0)
+        basis = np.stack([x[i - i_lo], w[:, best] @ x[na + rows[:, best]]])
+        out.fit_residual = self._rms(u, basis, np.array([alpha[best], beta[best]]))
+        if out.margin <= p.gross_margin:
+            out.state = SLIP_GROSS
+        elif out.stick_ratio <= p.slip_seen:
+            out.state = SLIP_PARTIAL
+        if out.state != SLIP_STICK:
+            out.friction = abs(q_over_p) / max(1.0 - out.margin, 1e-9)
+        return out
+
+    def _pair_terms(self, i_lo: int, i_hi: int) -> tuple[np.ndarray, ...]:
+        """The (a, c) pairs of a grid and their tangential terms (cached per grid).
+
+        Pairs c = jc <= a = ia + 1 with a a candidate (ia >= i_lo).  The tangential term
+        T_a - (c/a) T_c is written sum_m w_m T_m over three rows; at c = a it vanishes with
+        the slip annulus, so there it is replaced by its limit divided by 1 - (c/a)^3,
+        (T_a + a dT/da) / 3, the derivative by central difference.  ``force_share`` is
+        sum_m w_m (s_m / a)^2, the share of the Hertz force 2 pi a^2 / 3 (per unit peak) the
+        term carries: 1 - (c/a)^3 for a regular pair, 1 at c = a.
+        """
+        key = (i_lo, i_hi)
+        if key not in self._pairs:
+            ia, jc = np.tril_indices(i_hi + 1, 1, i_hi + 2)
+            keep = ia >= i_lo
+            ia, jc = ia[keep], jc[keep]
+            k = jc / ia
+            edge = jc == ia
+            rows = np.stack([ia, jc, ia])
+            w = np.stack([np.ones(len(ia)), -k, np.zeros(len(ia))])
+            rows[:, edge] = np.stack([ia[edge], ia[edge] + 1, ia[edge] - 1])
+            w[:, edge] = np.stack([np.full(edge.sum(), 1.0 / 3.0), ia[edge] / 6.0,
+                                   -ia[edge] / 6.0])
+            force_share = np.einsum("mp,mp->p", w, (rows / ia) ** 2)
+            if len(self._pairs) > 64:
+                self._pairs.clear()
+            self._pairs[key] = (ia, jc, rows, w, force_share)
+        return self._pairs[key]
+
+    def _rms(self, u: np.ndarray, basis: np.ndarray, coef: np.ndarray) -> float:
+        """RMS (m) of the unweighted residual of a fit over the window's cells."""
+        resid = (u - coef @ basis).reshape(-1, 3) / self._weights
+        return float(np.sqrt(np.mean(resid * resid)))
