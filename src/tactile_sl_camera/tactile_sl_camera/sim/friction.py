@@ -110,3 +110,19 @@ def tangential_traction(pressure: np.ndarray, stick_profile: np.ndarray | None,
     elif slip.state not in (STATE_PARTIAL_SLIP, STATE_GROSS_SLIP):
         return np.zeros(np.shape(pressure) + (2,))
     return np.stack([q * slip.direction[0], q * slip.direction[1]], axis=-1)
+
+
+def slip_from_message(msg: object) -> ContactSlip:
+    """The :class:`ContactSlip` of a ``tactile_sl_msgs/Slip`` (rclpy, bag-decoded or dict)."""
+    get = (lambda m, k: m[k]) if isinstance(msg, dict) else getattr
+
+    def vec(v: object) -> tuple[float, float, float]:
+        return (float(get(v, "x")), float(get(v, "y")), float(get(v, "z")))
+
+    direction, centre = vec(get(msg, "direction")), vec(get(msg, "centroid"))
+    q = float(get(msg, "tangential_force"))
+    return ContactSlip(int(get(msg, "state")), float(get(msg, "stick_ratio")),
+                       float(get(msg, "slip_margin")), float(get(msg, "friction_coefficient")),
+                       direction, (q * direction[0], q * direction[1]),
+                       float(get(msg, "normal_force")), float(get(msg, "contact_radius")),
+                       centre)

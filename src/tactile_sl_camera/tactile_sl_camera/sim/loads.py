@@ -33,6 +33,7 @@ from .friction import (
     STATE_PARTIAL_SLIP,
     ContactSlip,
     cattaneo_mindlin,
+    slip_from_message,
     tangential_traction,
 )
 
@@ -297,12 +298,13 @@ def _xyz(v: object) -> np.ndarray:
     return np.array([float(get("x")), float(get("y")), float(get("z"))])
 
 
-def touch_truth_from_messages(wrench: object | None, field_cloud: object, contact: object
-                              ) -> TouchTruth:
+def touch_truth_from_messages(wrench: object | None, field_cloud: object, contact: object,
+                              slip: object | None = None) -> TouchTruth:
     """The :class:`TouchTruth` of one frame from its ``ground_truth/{wrench,field,contact}``.
 
     Accepts bag-decoded or rclpy messages (``wrench`` None where the bag has none: a frame
-    with geometric indenters), so an evaluation reads bags and renders alike.
+    with geometric indenters; ``slip`` its ``ground_truth/slip``, None without friction),
+    so an evaluation reads bags and renders alike.
     """
     from ..clouds import FIELD_DTYPE, cloud_to_arrays
 
@@ -322,6 +324,7 @@ def touch_truth_from_messages(wrench: object | None, field_cloud: object, contac
         region_area=np.asarray(c.region_area, dtype=np.float64),  # type: ignore[attr-defined]
         region_centroid=np.array([_xyz(p) for p in c.region_centroid]  # type: ignore
                                  ).reshape(-1, 3),
+        slip=None if slip is None else slip_from_message(slip),
         rows=cells["row"].astype(np.int64), cols=cells["col"].astype(np.int64),
         position=np.stack([cells["x"], cells["y"], cells["z"]], axis=1).astype(np.float64),
         displacement=np.stack([cells["dx"], cells["dy"], cells["dz"]], axis=1

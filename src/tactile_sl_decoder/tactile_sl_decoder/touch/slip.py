@@ -17,10 +17,13 @@ shape, sampled at every decoded cell with a known material identity, tells c / a
 
 Estimate, per frame (no rclpy):
 
-1. the contact pressing hardest (the contact state's first region): its centre and a first
-   radius sqrt(area / pi); the decoded cells within ``window`` radii of the centre;
-2. its tangential direction: a least-squares fit of a pressure and two tangential
-   (x, y) Hertz terms at the first radius; a tangential amplitude below
+1. the contact pressing hardest: of the 8-connected sets of cells of the traction map
+   pressing by more than the contact state's area fraction of the peak, the one with the
+   largest force; its force-weighted centre and a first radius sqrt(area / pi); the
+   decoded cells within ``window`` radii of the centre;
+2. its centre and tangential direction: a least-squares fit of a pressure and two
+   tangential (x, y) Hertz terms at the first radius, with one Gauss-Newton step on the
+   centre (the map's centroid moves with the tangential load); a tangential amplitude below
    ``tangential_fraction`` of the normal one means no tangential load (stick, margin 1);
 3. a and c on a grid of radii (``radius_step`` pitches apart): for every pair c <= a the
    two amplitudes (alpha, beta) by weighted linear least squares (Gram matrices of all
@@ -41,7 +44,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
+import cv2
 import numpy as np
 
 from tactile_sl_camera.elasticity import Elastomer
@@ -213,22 +218,33 @@ class SlipEstimator:
 
     # ------------------------------------------------------------------ estimate
 
-    def estimate(self, rest_xy: np.ndarray, displacement: np.ndarray,
-                 contact: ContactState) -> SlipEstimate:
+    def estimate(self, rest_xy: np.ndarray, displacement: np.ndarray, pressing: np.ndarray,
+                 contact: ContactState, area_fraction: float,
+                 lattice: np.ndarray | None = None) -> SlipEstimate:
         """Slip of the contact pressing hardest, from the decoded cells of one frame.
 
-        ``rest_xy`` (M, 2) rest positions and ``displacement`` (M, 3) of the decoded cells
-        (pad frame, m); ``contact`` the frame's contact state (its first region is the
-        contact pressing hardest).  Never raises on a frame's data: no contact gives
-        ``SLIP_NO_CONTACT`` with NaN, a contact with too few decoded cells around it (e.g.
-        mostly off the pad) gives ``SLIP_STICK`` with NaN margin and stick ratio.
+        ``rest_xy`` (M, 2) rest positions, ``displacement`` (M, 3) and ``pressing`` (M,)
+        the normal force (N, >= 0 pressing) of the decoded cells (pad frame, m);
+        ``contact`` the frame's contact state (``in_contact`` gates the estimate);
+        ``area_fraction`` the share of the peak above which a cell counts into a contact;
+        ``lattice`` (M, 2) the cells' integer (column, row), from their rest positions if
+        not given.
+        Never raises on a frame's data: no contact gives ``SLIP_NO_CONTACT`` with NaN, a
+        contact with too few decoded cells around it (e.g. mostly off the pad) gives
+        ``SLIP_STICK`` with NaN margin and stick ratio.
         """
-        if not contact.in_contact or not contact.region_force:
+        if not contact.in_contact:
             return SlipEstimate()
         p = self.params
-        centre = np.asarray(contact.region_centroid[0][:2], np.float64)
-        first = max(math.sqrt(max(float(contact.region_area[0]), 0.0) / math.pi),
-                    2 * self.response.step)
+        rest = np.asarray(rest_xy, np.float64)
+        if lattice is None:
+            lattice = self._lattice(rest)
+        found = self._strongest(rest, np.asarray(pressing, np.float64), area_fraction,
+                                np.asarray(lattice))
+        if found is None:
+            return SlipEstimate()
+        centre, area = found
+        first = max(math.sqrt(area / math.pi), 2 * self.response.step)
         out = SlipEstimate(state=SLIP_STICK, centroid=(float(centre[0]), float(centre[1]), 0.0))
         # candidate radii: every stride-th table radius, about radii_per_contact per radius
         stride = max(1, round(first / (p.radii_per_contact * self.response.step)))
@@ -237,14 +253,12 @@ class SlipEstimator:
         i_lo = max(2, int(math.floor(p.radius_range[0] * first / step)))
         i_hi = min(n_max - 2, int(math.ceil(p.radius_range[1] * first / step)))
         reach = min(p.window * first, self.response.max_distance)
-        rest = np.asarray(rest_xy, np.float64)
         d = rest - centre
         good = (np.einsum("ij,ij->i", d, d) < reach * reach) & np.isfinite(displacement).all(1)
         out.cells = int(good.sum())
         if out.cells < p.min_cells or i_hi <= i_lo:
             return out
         if out.cells > p.max_cells:   # a large contact: half its cells carry the information
-            lattice = np.rint(rest / self.pitch).astype(np.int64)
             good &= (lattice[:, 0] + lattice[:, 1]) % 2 == 0
         rest = rest[good]
         u = (np.asarray(displacement, np.float64)[good] * self._weights).ravel()
@@ -271,6 +285,34 @@ class SlipEstimator:
         x = np.concatenate([pressure, self._tangential(f, e, angles)])  # P_lo..hi, T_0..hi+1
         return self._fit(out, u, x, e, i_lo, i_hi, step)
 
+    def _lattice(self, rest: np.ndarray) -> np.ndarray:
+        """(M, 2) integer column and row of every cell, counted from the first decoded ones."""
+        return np.rint((rest - rest.min(axis=0)) / self.pitch).astype(np.int64)
+
+    def _strongest(self, rest: np.ndarray, pressing: np.ndarray, fraction: float,
+                   lattice: np.ndarray) -> tuple[np.ndarray, float] | None:
+        """Centre (force-weighted) and area of the contact pressing hardest.
+
+        Contacts are the 8-connected sets of cells pressing by more than ``fraction`` of
+        the peak (the contact state's area rule); the traction map's low skirt can join two
+        contacts into one region of the contact state, this level keeps them apart.
+        """
+        if len(pressing) == 0 or not np.isfinite(pressing).all():
+            return None
+        peak = float(pressing.max())
+        if peak <= 0:
+            return None
+        strong = pressing > fraction * peak
+        grid = np.zeros((int(lattice[:, 1].max()) + 1, int(lattice[:, 0].max()) + 1), np.uint8)
+        grid[lattice[strong, 1], lattice[strong, 0]] = 1
+        count, labels = cv2.connectedComponents(grid, connectivity=8)
+        label = np.where(strong, labels[lattice[:, 1], lattice[:, 0]], 0)
+        force = np.bincount(label, weights=pressing, minlength=count)
+        force[0] = 0.0
+        sel = label == int(np.argmax(force))
+        w = pressing[sel]
+        return (w @ rest[sel]) / w.sum(), float(sel.sum()) * self.pitch * self.pitch
+
     def _first_fit(self, rest: np.ndarray, centre: np.ndarray, u: np.ndarray,
                    table: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Centre, (alpha, beta_x, beta_y) and the bases (at the first centre) at one radius.
@@ -281,14 +323,17 @@ class SlipEstimator:
         derivatives by forward differences.
         """
         h = 0.05 * self.pitch
-        x3 = self._three(rest - centre, table)
+        d = rest - centre
+        # the bases at the centre and at the centre moved by h along x and along y, at once
+        three = self._three(np.concatenate([d, d - (h, 0.0), d - (0.0, h)]), table)
+        three = three.reshape(3, 3, -1)                   # (basis, centre, 3M)
+        x3 = three[:, 0]
         try:
             coef = np.linalg.solve(x3 @ x3.T, x3 @ u)
             if coef[0] < 0:
                 model = coef @ x3
-                grads = [(coef @ self._three(rest - centre - h * ax, table) - model) / h
-                         for ax in (np.array([1.0, 0.0]), np.array([0.0, 1.0]))]
-                jac = np.concatenate([x3, np.stack(grads)])
+                grads = (np.einsum("b,bkm->km", coef, three[:, 1:]) - model) / h
+                jac = np.concatenate([x3, grads])
                 step = np.linalg.solve(jac @ jac.T, jac @ u)
                 centre = centre + np.clip(step[3:], -self.pitch, self.pitch)
                 coef = step[:3]
@@ -297,7 +342,10 @@ class SlipEstimator:
         return centre, coef, x3
 
     def _three(self, d: np.ndarray, table: np.ndarray) -> np.ndarray:
-        """Weighted pressure, x- and y-tangential responses (3, 3M) of one table radius."""
+        """Weighted pressure, x- and y-tangential responses (3, 3N) of one table radius.
+
+        ``d`` (N, 2): the points relative to the centre of the traction.
+        """
         r = np.sqrt(np.einsum("ij,ij->i", d, d))
         f = self.response.sample(r, table)[0]
         A, B, C, D = f
@@ -344,14 +392,14 @@ class SlipEstimator:
         gram = x @ x.T
         xu = x @ u
         uu = float(u @ u)
-        ia, jc, rows, w, force_share = self._pair_terms(i_lo, i_hi)
-        pp = ia - i_lo                           # rows of x: pressure of a
-        t = na + rows                            # rows of x: tangential terms
-        a11 = gram[pp, pp]
-        a12 = np.einsum("mp,mp->p", w, gram[pp, t])
-        a22 = np.einsum("mp,np,mnp->p", w, w, gram[t[:, None], t[None, :]])
+        ia, jc, rows, w, force_share, gather = self._pair_terms(i_lo, i_hi)
+        pp, t, i11, i12, i22, ww = gather
+        flat = gram.ravel()
+        a11 = flat[i11]
+        a12 = (w * flat[i12]).sum(axis=0)
+        a22 = (ww * flat[i22]).sum(axis=(0, 1))
         b1 = xu[pp]
-        b2 = np.einsum("mp,mp->p", w, xu[t])
+        b2 = (w * xu[t]).sum(axis=0)
         det = a11 * a22 - a12 * a12
         with np.errstate(divide="ignore", invalid="ignore"):
             alpha = (a22 * b1 - a12 * b2) / det
@@ -387,7 +435,7 @@ class SlipEstimator:
             out.friction = abs(q_over_p) / max(1.0 - out.margin, 1e-9)
         return out
 
-    def _pair_terms(self, i_lo: int, i_hi: int) -> tuple[np.ndarray, ...]:
+    def _pair_terms(self, i_lo: int, i_hi: int) -> tuple[Any, ...]:
         """The (a, c) pairs of a grid and their tangential terms (cached per grid).
 
         Pairs c = jc <= a = ia + 1 with a a candidate (ia >= i_lo).  The tangential term
@@ -410,9 +458,14 @@ class SlipEstimator:
             w[:, edge] = np.stack([np.full(edge.sum(), 1.0 / 3.0), ia[edge] / 6.0,
                                    -ia[edge] / 6.0])
             force_share = np.einsum("mp,mp->p", w, (rows / ia) ** 2)
+            # flat indices into the Gram matrix of [P_lo .. P_hi, T_0 .. T_hi+1]
+            na, size = i_hi - i_lo + 1, 2 * i_hi - i_lo + 3
+            pp, t = ia - i_lo, na + rows
+            gather = (pp, t, pp * size + pp, pp * size + t,
+                      t[:, None] * size + t[None, :], w[:, None] * w[None, :])
             if len(self._pairs) > 64:
                 self._pairs.clear()
-            self._pairs[key] = (ia, jc, rows, w, force_share)
+            self._pairs[key] = (ia, jc, rows, w, force_share, gather)
         return self._pairs[key]
 
     def _rms(self, u: np.ndarray, basis: np.ndarray, coef: np.ndarray) -> float:

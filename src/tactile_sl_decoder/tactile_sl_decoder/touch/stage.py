@@ -270,7 +270,9 @@ class TouchStage:
         force = np.zeros((len(rows), 3))
         force[known] = forces_ref[k[known]]
         t3 = time.perf_counter()
-        slip = self.slip.estimate(self._rest_table[flat, :2], displacement, contact)
+        slip = self.slip.estimate(self._rest_table[flat, :2], displacement, -force[:, 2],
+                                  contact, self.contact_params.area_fraction,
+                                  np.column_stack([cols, rows]))
         t4 = time.perf_counter()
         result = TouchResult(rows, cols, position, displacement, force, wrench_force,
                              wrench_moment, contact, depth,
