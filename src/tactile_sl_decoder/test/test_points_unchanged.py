@@ -13,9 +13,11 @@ stereo/rescue.py: edge and harsh_lighting each gained the one point they lacked,
 cell checked against the ground truth; every other frame byte-identical), and when the
 centroid threshold learnt to follow the background at a dark object's rim (issue 11,
 extract/centroid.py: robust_dark_object's points moved, RMSE 0.0076 -> 0.0054 mm, same
-cells; the other eleven bags byte-identical).  A change that alters any
-decoded point, even in the last bit, fails here; when a change is *meant* to alter points
-(a better decoder), record the digests again and say so in the commit.
+cells; the other eleven bags byte-identical), and when the two slip bags were added (issue
+24: slip_halfspace, slip_two_contacts; their digests recorded with ``tools/points_digest.py``
+on an Intel Xeon, where every other bag's digests reproduced byte-identically).  A change
+that alters any decoded point, even in the last bit, fails here; when a change is *meant*
+to alter points (a better decoder), record the digests again and say so in the commit.
 
 Bytes are only comparable on the CPU model the digests were recorded on: numpy and OpenCV
 pick SIMD code paths per CPU, which can move a float's last bit.  On another CPU model the

@@ -35,16 +35,17 @@ Estimate, per frame (no rclpy):
 
 Where it stops being valid (docs/slip.md): non-spherical contacts (a flat punch's or a
 cylinder's pressure is not Hertzian), torsion (a twist adds a circumferential traction),
-several contacts (the others' fields leak into the window; the strongest is still measured,
-less accurately), unloading and reversals of Q (Mindlin-Deresiewicz: the traction then
-depends on the loading history, which a single frame does not show), and normal loads
-changing while Q rises.
+several contacts (the others' fields leak into the window: they are modelled as Hertz terms
+of their own size with free amplitudes and projected out, which removes most of it; the
+strongest is still measured, less accurately), unloading and reversals of Q
+(Mindlin-Deresiewicz: the traction then depends on the loading history, which a single
+frame does not show), and normal loads changing while Q rises.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import cv2
 import numpy as np
@@ -58,6 +59,11 @@ STATE_NAMES = {SLIP_NO_CONTACT: "none", SLIP_STICK: "stick", SLIP_PARTIAL: "part
                SLIP_GROSS: "gross"}
 NAN = float("nan")
 HERTZ_FORCE = 2.0 * math.pi / 3.0   # integral of sqrt(1 - r^2/a^2) over the disc, over a^2
+MAX_CONTACTS = 4                    # the other contacts modelled in the window: at most 3
+
+
+def _identity(v: np.ndarray) -> np.ndarray:
+    return v
 
 
 @dataclass
@@ -71,7 +77,7 @@ class SlipParams:
                                      # about this many fit in the first contact radius
     max_radius: float = 16.0       # pitches: largest contact radius measured
     tangential_fraction: float = 0.02   # |Q| / P below this: no tangential load
-    slip_seen: float = 0.8         # stick ratio at or below which the slip annulus is seen
+    slip_seen: float = 0.85        # stick ratio at or below which the slip annulus is seen
     gross_margin: float = 0.05     # slip margin at or below which the contact slides
     noise_tangential: float = 1e-6  # m, displacement noise in x, y (least-squares weight)
     noise_normal: float = 3e-6     # m, displacement noise in z
@@ -182,7 +188,7 @@ class SlipEstimator:
             elastomer, step, max_radius * p.radius_range[1], max_radius * p.window)
         w = np.array([1.0 / p.noise_tangential, 1.0 / p.noise_tangential, 1.0 / p.noise_normal])
         self._weights = w * p.noise_tangential   # relative: the x, y weights are 1
-        self._pairs: dict[tuple[int, int], tuple[np.ndarray, ...]] = {}
+        self._pairs: dict[tuple[int, int], tuple[Any, ...]] = {}
 
     # ------------------------------------------------------------------ bases
 
@@ -239,11 +245,11 @@ class SlipEstimator:
         rest = np.asarray(rest_xy, np.float64)
         if lattice is None:
             lattice = self._lattice(rest)
-        found = self._strongest(rest, np.asarray(pressing, np.float64), area_fraction,
-                                np.asarray(lattice))
-        if found is None:
+        contacts = self._contacts(rest, np.asarray(pressing, np.float64), area_fraction,
+                                  np.asarray(lattice))
+        if not contacts:
             return SlipEstimate()
-        centre, area = found
+        centre, area = contacts[0]
         first = max(math.sqrt(area / math.pi), 2 * self.response.step)
         out = SlipEstimate(state=SLIP_STICK, centroid=(float(centre[0]), float(centre[1]), 0.0))
         # candidate radii: every stride-th table radius, about radii_per_contact per radius
@@ -262,10 +268,15 @@ class SlipEstimator:
             good &= (lattice[:, 0] + lattice[:, 1]) % 2 == 0
         rest = rest[good]
         u = (np.asarray(displacement, np.float64)[good] * self._weights).ravel()
+        # the other contacts' fields leak into the window: modelled as Hertz pressure and
+        # tangential (x, y) terms of their own size, with free amplitudes, and projected
+        # out of the data and of every basis (the same least squares as fitting them too)
+        project = self._others(rest, contacts[1:])
+        u = project(u)
         # 2. centre and direction: pressure + tangential x, y at the first radius
         i_first = int(np.clip(round(first / step), i_lo, i_hi))
         first_table = np.array([stride * i_first])
-        fitted = self._first_fit(rest, centre, u, first_table)
+        fitted = self._first_fit(rest, centre, u, first_table, project)
         if fitted is None:
             return out
         centre, coef, x3 = fitted
@@ -278,24 +289,40 @@ class SlipEstimator:
         r = np.sqrt(np.einsum("ij,ij->i", d, d))
         f = self.response.sample(r, stride * np.arange(i_hi + 2))    # (i_hi + 2, 4, M)
         angles = self._angles(d, r)
-        pressure = self._pressure(f[i_lo:i_hi + 1], *angles[:2])
+        pressure = project(self._pressure(f[i_lo:i_hi + 1], *angles[:2]))
         if q_over_p < p.tangential_fraction:
             return self._normal_only(out, u, pressure, i_lo, step)
         e = beta0 / np.hypot(*beta0)
-        x = np.concatenate([pressure, self._tangential(f, e, angles)])  # P_lo..hi, T_0..hi+1
-        return self._fit(out, u, x, e, i_lo, i_hi, step)
+        x = np.concatenate([pressure, project(self._tangential(f, e, angles))])
+        return self._fit(out, u, x, e, i_lo, i_hi, step)    # x: P_lo..hi, T_0..hi+1
+
+    def _others(self, rest: np.ndarray, others: list[tuple[np.ndarray, float]]
+                ) -> Callable[[np.ndarray], np.ndarray]:
+        """The projection removing the other contacts' Hertz terms from weighted vectors."""
+        if not others:
+            return _identity
+        n = self.response.tables.shape[0]
+        terms = [self._three(rest - c, np.array([int(np.clip(
+            round(math.sqrt(area / math.pi) / self.response.step), 1, n - 1))]))
+            for c, area in others]
+        q, _ = np.linalg.qr(np.concatenate(terms).T)     # (3M, 3k) orthonormal
+
+        def project(v: np.ndarray) -> np.ndarray:
+            return v - (v @ q) @ q.T
+        return project
 
     def _lattice(self, rest: np.ndarray) -> np.ndarray:
         """(M, 2) integer column and row of every cell, counted from the first decoded ones."""
         return np.rint((rest - rest.min(axis=0)) / self.pitch).astype(np.int64)
 
-    def _strongest(self, rest: np.ndarray, pressing: np.ndarray, fraction: float,
-                   lattice: np.ndarray) -> tuple[np.ndarray, float] | None:
-        """Centre (force-weighted) and area of the contact pressing hardest.
+    def _contacts(self, rest: np.ndarray, pressing: np.ndarray, fraction: float,
+                  lattice: np.ndarray) -> list[tuple[np.ndarray, float]] | None:
+        """Centre (force-weighted) and area of each contact, the one pressing hardest first.
 
         Contacts are the 8-connected sets of cells pressing by more than ``fraction`` of
         the peak (the contact state's area rule); the traction map's low skirt can join two
-        contacts into one region of the contact state, this level keeps them apart.
+        contacts into one region of the contact state, this level keeps them apart.  At
+        most ``MAX_CONTACTS``; None when nothing presses.
         """
         if len(pressing) == 0 or not np.isfinite(pressing).all():
             return None
@@ -309,12 +336,18 @@ class SlipEstimator:
         label = np.where(strong, labels[lattice[:, 1], lattice[:, 0]], 0)
         force = np.bincount(label, weights=pressing, minlength=count)
         force[0] = 0.0
-        sel = label == int(np.argmax(force))
-        w = pressing[sel]
-        return (w @ rest[sel]) / w.sum(), float(sel.sum()) * self.pitch * self.pitch
+        contacts = []
+        for k in np.argsort(-force)[:MAX_CONTACTS]:
+            if force[k] <= 0:
+                break
+            sel = label == k
+            w = pressing[sel]
+            contacts.append(((w @ rest[sel]) / w.sum(), float(sel.sum()) * self.pitch ** 2))
+        return contacts
 
     def _first_fit(self, rest: np.ndarray, centre: np.ndarray, u: np.ndarray,
-                   table: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                   table: np.ndarray, project: Callable[[np.ndarray], np.ndarray]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         """Centre, (alpha, beta_x, beta_y) and the bases (at the first centre) at one radius.
 
         The contact state's centroid comes from the traction map, which a tangential load
@@ -326,7 +359,7 @@ class SlipEstimator:
         d = rest - centre
         # the bases at the centre and at the centre moved by h along x and along y, at once
         three = self._three(np.concatenate([d, d - (h, 0.0), d - (0.0, h)]), table)
-        three = three.reshape(3, 3, -1)                   # (basis, centre, 3M)
+        three = project(three.reshape(9, -1)).reshape(3, 3, -1)   # (basis, centre, 3M)
         x3 = three[:, 0]
         try:
             coef = np.linalg.solve(x3 @ x3.T, x3 @ u)
