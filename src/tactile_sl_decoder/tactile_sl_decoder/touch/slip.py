@@ -75,14 +75,14 @@ class SlipParams:
     radius_step: float = 0.25      # pitches between table radii ...
     radii_per_contact: float = 12.0  # ... of which every n-th is a candidate, n such that
                                      # about this many fit in the first contact radius
-    max_radius: float = 16.0       # pitches: largest contact radius measured
+    max_radius: float = 12.0       # pitches: largest first contact radius measured
     tangential_fraction: float = 0.02   # |Q| / P below this: no tangential load
     slip_seen: float = 0.85        # stick ratio at or below which the slip annulus is seen
     gross_margin: float = 0.05     # slip margin at or below which the contact slides
     noise_tangential: float = 1e-6  # m, displacement noise in x, y (least-squares weight)
     noise_normal: float = 3e-6     # m, displacement noise in z
     min_cells: int = 12            # fewer decoded cells in the window: not measured
-    max_cells: int = 320           # more: every other cell (checkerboard) is fitted
+    max_cells: int = 240           # more: every other cell (checkerboard) is fitted
 
     def validate(self) -> "SlipParams":
         """Raise ValueError for values outside their ranges."""
@@ -193,10 +193,12 @@ class SlipEstimator:
     # ------------------------------------------------------------------ bases
 
     def _angles(self, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, ...]:
-        """cos, sin, cos 2, sin 2 of every cell's angle around the centre."""
-        safe = np.where(r > 0, r, 1.0)
-        cos = np.where(r > 0, d[:, 0] / safe, 1.0)
-        sin = np.where(r > 0, d[:, 1] / safe, 0.0)
+        """cos, sin, cos 2, sin 2 of every cell's angle around the centre.
+
+        All zero at the centre itself, where every angular term's radial factor vanishes.
+        """
+        inv = 1.0 / np.maximum(r, 1e-12)
+        cos, sin = d[:, 0] * inv, d[:, 1] * inv
         return cos, sin, cos * cos - sin * sin, 2.0 * sin * cos
 
     def _pressure(self, f: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
