@@ -37,7 +37,7 @@ The tables agree with the cell-kernel convolution the simulator renders with
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import special
@@ -142,6 +142,7 @@ class HertzResponse:
     step: float
     dr: float
     tables: np.ndarray
+    _pairs: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         # value and slope to the next distance as one complex number per entry, so that a

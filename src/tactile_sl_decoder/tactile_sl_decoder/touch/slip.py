@@ -25,13 +25,15 @@ Estimate, per frame (no rclpy):
    tangential (x, y) Hertz terms at the first radius, with one Gauss-Newton step on the
    centre (the map's centroid moves with the tangential load); a tangential amplitude below
    ``tangential_fraction`` of the normal one means no tangential load (stick, margin 1);
-3. a and c on a grid of radii (``radius_step`` pitches apart): for every pair c <= a the
-   two amplitudes (alpha, beta) by weighted linear least squares (Gram matrices of all
-   terms, so the whole grid costs one matrix product), the pair of least residual,
-   refined by a parabola through the residuals of its neighbours along c and along a;
+3. a and c on a grid of radii (:mod:`.mindlin_fit`): for every pair c <= a the two
+   amplitudes (alpha, beta) by weighted linear least squares (one Gram matrix of all terms
+   for the whole grid), the pair of least residual, refined by a quadric through the
+   residuals of its 3 x 3 neighbourhood;
 4. stick ratio (c/a)^2, slip margin (c/a)^3 = 1 - |Q|/(mu P), Q/P = beta (1 - (c/a)^3) /
    p0 (the fitted tractions' sums), mu = (Q/P) / (1 - (c/a)^3) once a slip annulus is seen
-   (stick ratio <= ``slip_seen``), gross slip when the margin is <= ``gross_margin``.
+   (stick ratio <= ``slip_seen``), gross slip when the margin is <= ``gross_margin``;
+5. other contacts: each is modelled as Hertz pressure and tangential terms of its own size
+   with free amplitudes, projected out of the data and of every basis before 2. and 3.
 
 Where it stops being valid (docs/slip.md): non-spherical contacts (a flat punch's or a
 cylinder's pressure is not Hertzian), torsion (a twist adds a circumferential traction),
@@ -44,8 +46,8 @@ frame does not show), and normal loads changing while Q rises.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any, Callable
+from dataclasses import dataclass
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -54,6 +56,12 @@ from tactile_sl_camera.elasticity import Elastomer
 from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_NO_CONTACT, SLIP_PARTIAL, SLIP_STICK
 from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.hertz_response import HertzResponse, hertz_response
+from tactile_sl_decoder.touch.mindlin_fit import (
+    HertzBases,
+    MindlinFit,
+    MindlinGrid,
+    parabola_vertex,
+)
 
 STATE_NAMES = {SLIP_NO_CONTACT: "none", SLIP_STICK: "stick", SLIP_PARTIAL: "partial",
                SLIP_GROSS: "gross"}
@@ -129,49 +137,10 @@ class SlipEstimate:
     tangential_force: float = NAN   # N, |Q| of the fitted tangential traction
     fit_residual: float = NAN       # m, RMS of the fit's residual over the window's cells
     cells: int = 0                  # decoded cells in the window
-    timings_ms: dict[str, float] = field(default_factory=dict)
 
     @property
     def state_name(self) -> str:
         return STATE_NAMES.get(self.state, str(self.state))
-
-
-def _parabola(r_minus: float, r0: float, r_plus: float) -> float:
-    """Offset (-1..1 steps) of the vertex of the parabola through three residuals."""
-    den = r_minus - 2.0 * r0 + r_plus
-    if not math.isfinite(den) or den <= 0:
-        return 0.0
-    return float(np.clip(0.5 * (r_minus - r_plus) / den, -1.0, 1.0))
-
-
-_DI, _DJ = (v.ravel() for v in np.mgrid[-1:2, -1:2])
-_QUADRIC = np.column_stack([np.ones(9), _DI, _DJ, _DI ** 2, _DJ ** 2, _DI * _DJ])
-_QUADRIC_PINV = np.linalg.pinv(_QUADRIC)
-
-
-def _refine(grid: np.ndarray, i: int, j: int, i_lo: int, i_hi: int) -> tuple[float, float]:
-    """Sub-step offsets (di, dj) of the residual's minimum around grid pair (i, j).
-
-    A quadric fitted by least squares to the 3 x 3 neighbourhood (the residual is even in c,
-    so c = -1 step mirrors c = 1 step; rows outside the a candidates are left out): its
-    stationary point when it is a minimum within one step; otherwise a parabola along c.
-    """
-    rows = i + _DI
-    cols = np.abs(j + _DJ)
-    ok = (rows >= i_lo) & (rows <= i_hi) & (cols < grid.shape[1])
-    z = np.full(9, np.inf)
-    z[ok] = grid[rows[ok], cols[ok]]
-    ok &= np.isfinite(z)
-    if ok.all() or ok.sum() >= 7:
-        coef = (_QUADRIC_PINV @ (z - z[4]) if ok.all()
-                else np.linalg.lstsq(_QUADRIC[ok], z[ok] - z[4], rcond=None)[0])
-        h = np.array([[2 * coef[3], coef[5]], [coef[5], 2 * coef[4]]])
-        if h[0, 0] > 0 and np.linalg.det(h) > 0:
-            d = -np.linalg.solve(h, coef[1:3])
-            if np.all(np.abs(d) <= 1.0):
-                return float(d[0]), float(d[1])
-    dj = _parabola(z[3], z[4], z[5]) if np.isfinite(z[3]) and np.isfinite(z[5]) else 0.0
-    return 0.0, dj
 
 
 class SlipEstimator:
@@ -188,41 +157,8 @@ class SlipEstimator:
             elastomer, step, max_radius * p.radius_range[1], max_radius * p.window)
         w = np.array([1.0 / p.noise_tangential, 1.0 / p.noise_tangential, 1.0 / p.noise_normal])
         self._weights = w * p.noise_tangential   # relative: the x, y weights are 1
-        self._pairs: dict[tuple[int, int], tuple[Any, ...]] = {}
-
-    # ------------------------------------------------------------------ bases
-
-    def _angles(self, d: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, ...]:
-        """cos, sin, cos 2, sin 2 of every cell's angle around the centre.
-
-        All zero at the centre itself, where every angular term's radial factor vanishes.
-        """
-        inv = 1.0 / np.maximum(r, 1e-12)
-        cos, sin = d[:, 0] * inv, d[:, 1] * inv
-        return cos, sin, cos * cos - sin * sin, 2.0 * sin * cos
-
-    def _pressure(self, f: np.ndarray, cos: np.ndarray, sin: np.ndarray) -> np.ndarray:
-        """Weighted responses (n, 3M) to unit-peak Hertz pressures (traction q_z = +w)."""
-        C, D = f[:, 2], f[:, 3]
-        out = np.empty((f.shape[0], f.shape[2], 3))
-        out[..., 0] = C * cos
-        out[..., 1] = C * sin
-        out[..., 2] = D * self._weights[2]
-        return out.reshape(f.shape[0], -1)
-
-    def _tangential(self, f: np.ndarray, e: np.ndarray, angles: tuple[np.ndarray, ...]
-                    ) -> np.ndarray:
-        """Weighted responses (n, 3M) to unit-peak Hertz tractions along the unit ``e``.
-
-        e_x (A - B cos 2, -B sin 2, -C cos) + e_y (-B sin 2, A + B cos 2, -C sin).
-        """
-        cos, sin, cos2, sin2 = angles
-        A, B, C = f[:, 0], f[:, 1], f[:, 2]
-        out = np.empty((f.shape[0], f.shape[2], 3))
-        out[..., 0] = e[0] * A - B * (e[0] * cos2 + e[1] * sin2)
-        out[..., 1] = e[1] * A - B * (e[0] * sin2 - e[1] * cos2)
-        out[..., 2] = C * (-self._weights[2] * (e[0] * cos + e[1] * sin))
-        return out.reshape(f.shape[0], -1)
+        self._bases = HertzBases(self.response, float(self._weights[2]))
+        self._grid = MindlinGrid()
 
     # ------------------------------------------------------------------ estimate
 
@@ -290,13 +226,35 @@ class SlipEstimator:
         d = rest - centre
         r = np.sqrt(np.einsum("ij,ij->i", d, d))
         f = self.response.sample(r, stride * np.arange(i_hi + 2))    # (i_hi + 2, 4, M)
-        angles = self._angles(d, r)
-        pressure = project(self._pressure(f[i_lo:i_hi + 1], *angles[:2]))
+        angles = self._bases.angles(d, r)
+        pressure = project(self._bases.pressure(f[i_lo:i_hi + 1], *angles[:2]))
         if q_over_p < p.tangential_fraction:
             return self._normal_only(out, u, pressure, i_lo, step)
         e = beta0 / np.hypot(*beta0)
-        x = np.concatenate([pressure, project(self._tangential(f, e, angles))])
-        return self._fit(out, u, x, e, i_lo, i_hi, step)    # x: P_lo..hi, T_0..hi+1
+        # 3. the (a, c) grid: x = P_lo..hi, T_0..hi+1
+        x = np.concatenate([pressure, project(self._bases.tangential(f, e, angles))])
+        fit = self._grid.fit(u, x, i_lo, i_hi, step)
+        return out if fit is None else self._figures(out, fit, u, e)
+
+    def _figures(self, out: SlipEstimate, fit: MindlinFit, u: np.ndarray, e: np.ndarray
+                 ) -> SlipEstimate:
+        """4.: stick ratio, margin, mu, forces, direction and state of the best pair."""
+        p = self.params
+        ratio = fit.c / fit.a
+        out.contact_radius, out.stick_radius = fit.a, fit.c
+        out.stick_ratio, out.margin = ratio * ratio, ratio ** 3
+        out.normal_force = HERTZ_FORCE * fit.a * fit.a * fit.p0
+        out.tangential_force = abs(fit.q_over_p) * out.normal_force
+        sign = 1.0 if fit.q_over_p >= 0 else -1.0
+        out.direction = (float(sign * e[0]), float(sign * e[1]), 0.0)
+        out.fit_residual = self._rms(u, fit.basis, fit.coef)
+        if out.margin <= p.gross_margin:
+            out.state = SLIP_GROSS
+        elif out.stick_ratio <= p.slip_seen:
+            out.state = SLIP_PARTIAL
+        if out.state != SLIP_STICK:
+            out.friction = abs(fit.q_over_p) / max(1.0 - out.margin, 1e-9)
+        return out
 
     def _others(self, rest: np.ndarray, others: list[tuple[np.ndarray, float]]
                 ) -> Callable[[np.ndarray], np.ndarray]:
@@ -304,7 +262,7 @@ class SlipEstimator:
         if not others:
             return _identity
         n = self.response.tables.shape[0]
-        terms = [self._three(rest - c, np.array([int(np.clip(
+        terms = [self._bases.three(rest - c, np.array([int(np.clip(
             round(math.sqrt(area / math.pi) / self.response.step), 1, n - 1))]))
             for c, area in others]
         q, _ = np.linalg.qr(np.concatenate(terms).T)     # (3M, 3k) orthonormal
@@ -360,7 +318,7 @@ class SlipEstimator:
         h = 0.05 * self.pitch
         d = rest - centre
         # the bases at the centre and at the centre moved by h along x and along y, at once
-        three = self._three(np.concatenate([d, d - (h, 0.0), d - (0.0, h)]), table)
+        three = self._bases.three(np.concatenate([d, d - (h, 0.0), d - (0.0, h)]), table)
         three = project(three.reshape(9, -1)).reshape(3, 3, -1)   # (basis, centre, 3M)
         x3 = three[:, 0]
         try:
@@ -376,22 +334,6 @@ class SlipEstimator:
             return None
         return centre, coef, x3
 
-    def _three(self, d: np.ndarray, table: np.ndarray) -> np.ndarray:
-        """Weighted pressure, x- and y-tangential responses (3, 3N) of one table radius.
-
-        ``d`` (N, 2): the points relative to the centre of the traction.
-        """
-        r = np.sqrt(np.einsum("ij,ij->i", d, d))
-        f = self.response.sample(r, table)[0]
-        A, B, C, D = f
-        cos, sin, cos2, sin2 = self._angles(d, r)
-        wz = self._weights[2]
-        out = np.empty((3, len(r), 3))
-        out[0, :, 0], out[0, :, 1], out[0, :, 2] = C * cos, C * sin, wz * D
-        out[1, :, 0], out[1, :, 1], out[1, :, 2] = A - B * cos2, -B * sin2, -wz * C * cos
-        out[2, :, 0], out[2, :, 1], out[2, :, 2] = -B * sin2, A + B * cos2, -wz * C * sin
-        return out.reshape(3, -1)
-
     def _normal_only(self, out: SlipEstimate, u: np.ndarray, pressure: np.ndarray,
                      i_lo: int, step: float) -> SlipEstimate:
         """No tangential load: stick, margin 1; the contact radius from the pressure alone."""
@@ -403,7 +345,8 @@ class SlipEstimator:
             return out
         di = 0.0
         if 0 < best < len(res) - 1:
-            di = _parabola(float(res[best - 1]), float(res[best]), float(res[best + 1]))
+            di = parabola_vertex(float(res[best - 1]), float(res[best]),
+                                 float(res[best + 1]))
         a = (i_lo + best + di) * step
         alpha = float(pu[best] / pp[best])
         out.stick_ratio, out.margin = 1.0, 1.0
@@ -412,96 +355,6 @@ class SlipEstimator:
         out.tangential_force = 0.0
         out.fit_residual = self._rms(u, pressure[best:best + 1], np.array([alpha]))
         return out
-
-    def _fit(self, out: SlipEstimate, u: np.ndarray, x: np.ndarray, e: np.ndarray,
-             i_lo: int, i_hi: int, step: float) -> SlipEstimate:
-        """3.-4.: the (a, c) grid, its refinement and the figures of the best pair.
-
-        ``x`` holds the weighted pressure responses of radii ``i_lo`` .. ``i_hi``, then the
-        tangential ones (along ``e``) of radii 0 .. ``i_hi`` + 1 (``step`` m apart; c may
-        exceed a by one step, so that a stick disc filling the contact has a minimum to
-        refine; c is then clamped to a).
-        """
-        p = self.params
-        na = i_hi - i_lo + 1
-        gram = x @ x.T
-        xu = x @ u
-        uu = float(u @ u)
-        ia, jc, rows, w, force_share, gather = self._pair_terms(i_lo, i_hi)
-        pp, t, i11, i12, i22, ww = gather
-        flat = gram.ravel()
-        a11 = flat[i11]
-        a12 = (w * flat[i12]).sum(axis=0)
-        a22 = (ww * flat[i22]).sum(axis=(0, 1))
-        b1 = xu[pp]
-        b2 = (w * xu[t]).sum(axis=0)
-        det = a11 * a22 - a12 * a12
-        with np.errstate(divide="ignore", invalid="ignore"):
-            alpha = (a22 * b1 - a12 * b2) / det
-            beta = (a11 * b2 - a12 * b1) / det
-            res = uu - (alpha * b1 + beta * b2)
-        res = np.where((det > 1e-12 * a11 * np.maximum(a22, 1e-300)) & np.isfinite(res),
-                       res, np.inf)
-        best = int(np.argmin(res))
-        if not math.isfinite(float(res[best])) or not alpha[best] < 0:
-            return out
-        grid = np.full((i_hi + 1, i_hi + 2), np.inf)
-        grid[ia, jc] = res
-        i, j = int(ia[best]), int(jc[best])
-        di, dj = _refine(grid, i, j, i_lo, i_hi)
-        a = (i + di) * step
-        c = min(max((j + dj) * step, 0.0), a)
-        ratio = c / a
-        p0 = -float(alpha[best])
-        q_over_p = float(beta[best]) * float(force_share[best]) / p0
-        out.contact_radius, out.stick_radius = a, c
-        out.stick_ratio, out.margin = ratio * ratio, ratio ** 3
-        out.normal_force = HERTZ_FORCE * a * a * p0
-        out.tangential_force = abs(q_over_p) * out.normal_force
-        sign = 1.0 if q_over_p >= 0 else -1.0
-        out.direction = (float(sign * e[0]), float(sign * e[1]), 0.0)
-        basis = np.stack([x[i - i_lo], w[:, best] @ x[na + rows[:, best]]])
-        out.fit_residual = self._rms(u, basis, np.array([alpha[best], beta[best]]))
-        if out.margin <= p.gross_margin:
-            out.state = SLIP_GROSS
-        elif out.stick_ratio <= p.slip_seen:
-            out.state = SLIP_PARTIAL
-        if out.state != SLIP_STICK:
-            out.friction = abs(q_over_p) / max(1.0 - out.margin, 1e-9)
-        return out
-
-    def _pair_terms(self, i_lo: int, i_hi: int) -> tuple[Any, ...]:
-        """The (a, c) pairs of a grid and their tangential terms (cached per grid).
-
-        Pairs c = jc <= a = ia + 1 with a a candidate (ia >= i_lo).  The tangential term
-        T_a - (c/a) T_c is written sum_m w_m T_m over three rows; at c = a it vanishes with
-        the slip annulus, so there it is replaced by its limit divided by 1 - (c/a)^3,
-        (T_a + a dT/da) / 3, the derivative by central difference.  ``force_share`` is
-        sum_m w_m (s_m / a)^2, the share of the Hertz force 2 pi a^2 / 3 (per unit peak) the
-        term carries: 1 - (c/a)^3 for a regular pair, 1 at c = a.
-        """
-        key = (i_lo, i_hi)
-        if key not in self._pairs:
-            ia, jc = np.tril_indices(i_hi + 1, 1, i_hi + 2)
-            keep = ia >= i_lo
-            ia, jc = ia[keep], jc[keep]
-            k = jc / ia
-            edge = jc == ia
-            rows = np.stack([ia, jc, ia])
-            w = np.stack([np.ones(len(ia)), -k, np.zeros(len(ia))])
-            rows[:, edge] = np.stack([ia[edge], ia[edge] + 1, ia[edge] - 1])
-            w[:, edge] = np.stack([np.full(edge.sum(), 1.0 / 3.0), ia[edge] / 6.0,
-                                   -ia[edge] / 6.0])
-            force_share = np.einsum("mp,mp->p", w, (rows / ia) ** 2)
-            # flat indices into the Gram matrix of [P_lo .. P_hi, T_0 .. T_hi+1]
-            na, size = i_hi - i_lo + 1, 2 * i_hi - i_lo + 3
-            pp, t = ia - i_lo, na + rows
-            gather = (pp, t, pp * size + pp, pp * size + t,
-                      t[:, None] * size + t[None, :], w[:, None] * w[None, :])
-            if len(self._pairs) > 64:
-                self._pairs.clear()
-            self._pairs[key] = (ia, jc, rows, w, force_share, gather)
-        return self._pairs[key]
 
     def _rms(self, u: np.ndarray, basis: np.ndarray, coef: np.ndarray) -> float:
         """RMS (m) of the unweighted residual of a fit over the window's cells."""
