@@ -49,15 +49,22 @@ CONTROL_BAG = "no_contact"
 SLIP_SCENES = BAGS / "slip_scenes.yaml"
 
 
-def render_slip_scenes(scenes_file: pathlib.Path, out: pathlib.Path
+def render_slip_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str]
                        ) -> list[tuple[str, pathlib.Path, SensorConfig]]:
-    """Every scene of ``scenes_file`` as a bag in ``out``: (name, bag, its sensor)."""
+    """The scenes of ``scenes_file`` as bags in ``out``: (name, bag, its sensor).
+
+    ``only``: these scene names (all when empty).
+    """
     from tactile_sl_camera.sim.scenes import load_scenes
     from tactile_sl_camera.sim.synth import RendererCache, write_scene_bag
 
     cache = RendererCache()
     bags = []
-    for scene in load_scenes(scenes_file):
+    scenes = load_scenes(scenes_file)
+    unknown = sorted(set(only) - {s.name for s in scenes})
+    if unknown:
+        raise SystemExit(f"bench_touch: no scene {', '.join(unknown)} in {scenes_file}")
+    for scene in (s for s in scenes if not only or s.name in only):
         sys.stderr.write(f"rendering {scene.name} ({scene.frames} frames)\n")
         path = write_scene_bag(scene, cache.get(scene), out / f"{scene.name}.mcap")
         bags.append((scene.name, path, SensorConfig(scene.elastomer, source=str(scenes_file))))
@@ -74,10 +81,12 @@ def main() -> int:
     parser.add_argument("--slip-scenes", type=pathlib.Path, default=SLIP_SCENES,
                         help="scenes with friction to render and evaluate (default: %(default)s)")
     parser.add_argument("--no-slip", action="store_true", help="leave the slip scenes out")
+    parser.add_argument("--only", action="append", default=[], metavar="SCENE",
+                        help="render only this slip scene (repeatable; default: all)")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_touch_") as tmp:
         slip_bags = [] if args.no_slip else render_slip_scenes(args.slip_scenes,
-                                                               pathlib.Path(tmp))
+                                                               pathlib.Path(tmp), args.only)
         return _run(args, slip_bags)
 
 
