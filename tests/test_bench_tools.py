@@ -28,6 +28,20 @@ def test_bench_pipeline_in_process_runs_with_floor_touch_and_both_carry_settings
                     "total+touch  / floor serial", "accuracy, carry on", "accuracy, carry off"):
         assert section in out.stdout, section
     assert "no_contact" in out.stdout
+    assert "\nslip " in out.stdout                   # the slip estimate's part of touch
+
+
+def test_bench_touch_prints_the_slip_table_and_times():
+    """The touch bags and one slip scene (rendered on the fly): the slip table with its
+    acceptance lines and the slip estimate's time beside the pipeline's."""
+    out = subprocess.run(
+        [sys.executable, str(REPO / "tools" / "bench_touch.py"), "--repeat", "1",
+         "--only", "slip_halfspace"],
+        capture_output=True, text=True, timeout=300, env=ros_env(next_domain_id()))
+    assert out.returncode == 0, out.stderr[-3000:]
+    for section in ("slip_halfspace", "gross slip:", "slip margin |error|",
+                    "friction coefficient |error|", "of which slip", "pipeline (total)"):
+        assert section in out.stdout, section
 
 
 def test_bench_sweep_runs_a_row_writes_its_figures_and_its_picture(tmp_path):

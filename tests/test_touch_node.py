@@ -1,11 +1,14 @@
 """The decoder node's touch outputs over DDS equal `tactile-sl replay`'s, field for field.
 
+Field, wrench, contact, depth and slip: one per frame after the reference, stamped like it.
+
 (Every field and array compares equal, so the payload bytes are the same; the CDR padding
 bytes are not compared: Fast CDR leaves them unset.)
 
 Also: nothing is published before the reference (said once), ``tare`` is refused while the
 pad is pressed, and a bad sensor file stops the node with one FATAL line.
 """
+import math
 import time
 
 import pytest
@@ -13,7 +16,7 @@ from test_decoder_node import BAG, _bag_messages, _io, _send_until_cloud, _wait_
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
-TOUCH_TOPICS = ("field", "wrench", "contact", "depth")
+TOUCH_TOPICS = ("field", "wrench", "contact", "depth", "slip")
 
 
 def _offline(tmp_path, bag=BAG):
@@ -35,8 +38,9 @@ def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import Image, PointCloud2
     from std_srvs.srv import Trigger
+    from visualization_msgs.msg import Marker, MarkerArray
 
-    from tactile_sl_msgs.msg import Contact
+    from tactile_sl_msgs.msg import Contact, Slip
 
     offline = _offline(tmp_path)
     assert len(offline["wrench"]) >= 2
@@ -44,11 +48,18 @@ def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros
     proc = ros.start()
     pubs, clouds = _io(ros)
     received: dict[str, dict] = {t: {} for t in TOUCH_TOPICS}
-    for topic, kind in zip(TOUCH_TOPICS, (PointCloud2, WrenchStamped, Contact, Image)):
+    types = dict(zip(TOUCH_TOPICS, (PointCloud2, WrenchStamped, Contact, Image, Slip)))
+    for topic, kind in types.items():
         def keep(msg, topic=topic):
             stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
             received[topic][stamp] = msg
         ros.node.create_subscription(kind, f"/tactile/{topic}", keep, 10)
+    markers: dict = {}
+
+    def keep_markers(msg):
+        stamp = msg.markers[0].header.stamp
+        markers[stamp.sec * 10**9 + stamp.nanosec] = msg
+    ros.node.create_subscription(MarkerArray, "/tactile/slip_markers", keep_markers, 10)
     _wait_matched(ros, pubs)
     frames: dict = {}
     for kind, side, m in _bag_messages(4):
@@ -62,17 +73,23 @@ def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros
         if i == 0:   # the reference is prepared beside the frames: outputs start once it is
             assert proc.wait_for_log("fit residual", 30.0, lambda: ros.spin(0.05)), proc.log()
     end = time.monotonic() + 5
-    while time.monotonic() < end and len(received["depth"]) < len(frames) - 1:
+    while time.monotonic() < end and min(map(len, received.values())) < len(frames) - 1:
         ros.spin(0.05)
     assert proc.wait_for_log("no outputs until the reference", 1.0), proc.log()
     assert sum("no outputs until the reference" in line for line in proc.lines()) == 1
     assert proc.wait_for_log("fit residual", 1.0)
-    types = dict(zip(TOUCH_TOPICS, (PointCloud2, WrenchStamped, Contact, Image)))
     for topic in TOUCH_TOPICS:
         assert len(received[topic]) == len(frames) - 1, (topic, proc.lines()[-5:])
         for stamp, msg in received[topic].items():
             replayed = deserialize_message(offline[topic][stamp], types[topic])
-            assert msg == replayed, f"{topic} at {stamp} differs from replay"
+            assert _same(msg, replayed), f"{topic} at {stamp} differs from replay"
+    # the RViz markers of the slip state: stamped like slip, the contact disc first
+    assert set(markers) == set(received["slip"])
+    for stamp, msg in markers.items():
+        disc = msg.markers[0]
+        assert disc.ns == "slip" and disc.header.frame_id == received["slip"][stamp].header.frame_id
+        assert disc.type == Marker.CYLINDER and disc.action == Marker.ADD
+        assert disc.scale.x == pytest.approx(2 * received["slip"][stamp].contact_radius)
 
     client = ros.node.create_client(Trigger, "/tactile/tare")
     assert client.wait_for_service(timeout_sec=10.0)
@@ -82,6 +99,16 @@ def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros
         ros.spin(0.05)
     assert future.done() and not future.result().success       # the bag's sphere presses
     assert "refused" in future.result().message
+
+
+def _same(a, b) -> bool:
+    """Message equality where NaN equals NaN (the slip message's 'unknown')."""
+    if a == b:
+        return True
+    if not hasattr(a, "get_fields_and_field_types"):
+        return isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)
+    return type(a) is type(b) and all(_same(getattr(a, f), getattr(b, f))
+                                      for f in a.get_fields_and_field_types())
 
 
 def test_bad_sensor_file_is_one_fatal_line(ros, tmp_path):

@@ -13,12 +13,13 @@ With --threads 2 (the default, as the node) each image runs in its own worker: e
 knn (the lattice's k-NN search + rectification of the glyph centres) and classify are then
 the slower worker's times, which overlap; "workers" is the wall time of that part.
 With touch outputs (the default; --no-touch leaves them out) the touch stage runs after
-every frame as in the node and replay ("touch", "total+touch"; "cpu+touch" is the process
-CPU time of both). In the same run and on the same frames: the floor, the work no decoder
-of this design can avoid (threshold + connected components of both images, one batched
-classifier pass over the patches the frame had to classify -- all of them with carry off,
-those not carried with carry on --, triangulation of the matched cells, the touch
-stage's two matrix-vector products), on one thread and with the two images' labelling in
+every frame as in the node and replay ("touch", of which "slip" is the slip estimate,
+"total+touch"; "cpu+touch" is the process CPU time of both). In the same run and on the same
+frames: the floor, the work no decoder of this design can avoid (threshold + connected
+components of both images, one batched classifier pass over the patches the frame had to
+classify -- all of them with carry off, those not carried with carry on --, triangulation
+of the matched cells, the touch stage's two matrix-vector products), on one thread and with
+the two images' labelling in
 two threads, and total / floor (see docs/decoder.md, "Floor and total / floor").
 Each bag runs from its first frame in bag order, once per repetition, so labels are carried
 from frame to frame as from a camera (--carry on, the default; off: every glyph classified
@@ -214,7 +215,8 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
     first = pipes[modes[0]]
     floors = {"serial": Floor(first, parallel=False), "parallel": Floor(first, parallel=True)}
     stages = ("check", "extract", "knn", "classify", "workers", "decode", "stereo", "total")
-    rows = list(stages) + (["touch", "total+touch", "cpu+touch"] if args.touch else [])
+    rows = list(stages) + (["touch", "slip", "total+touch", "cpu+touch"] if args.touch
+                           else [])
     timings: dict[str, dict[str, list[float]]] = {m: {s: [] for s in rows} for m in modes}
     carried: dict[str, list[float]] = {m: [] for m in modes}
     floor_t: dict[str, dict[str, list[float]]] = {k: {} for k in floors}
@@ -259,6 +261,8 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
                         continue                         # only frames with touch outputs
                     if args.touch:
                         t["touch"].append(1e3 * (t2 - t1))
+                        if touch is not None:           # the slip estimate, part of touch
+                            t["slip"].append(touch.timings_ms["slip"])
                         t["total+touch"].append(1e3 * (t2 - t0))
                         t["cpu+touch"].append(1e3 * (c1 - c0))
                     paired[mode]["total"].append(res.timings_ms["total"])

@@ -3,16 +3,25 @@
 
     python tools/bench_touch.py                  # the three touch bags + an untouched control
     python tools/bench_touch.py --repeat 5       # more frames for the timing figures
+    python tools/bench_touch.py --no-slip        # without the slip scenes
 
 Runs the evaluation of ``tactile-sl evaluate`` (pipeline + touch stage, each frame decoded
 once, reference = the first frame) over bags/touch_halfspace.mcap and
 bags/touch_calibration.mcap (elastic half-space) and bags/touch_layer.mcap (2 mm layer),
 with E and nu of bags/touch_scenes.yaml, and over bags/no_contact.mcap as an untouched
 control (truth: no force, no contact, no displacement).  Prints the per-frame and per-bag
-table with the acceptance limits of issue 10 (figures, not pass/fail: the exit status is 0),
-then the touch stage's time per frame (``TouchResult.timings_ms['touch']``) beside the
-pipeline's own time per stereo pair (``timings_ms['total']``), measured in the same run,
-and the machine's load.  Definitions: docs/touch_evaluation.md.
+table with the acceptance limits of issue 10 (figures, not pass/fail: the exit status is 0).
+
+Then the slip scenes (bags/slip_scenes.yaml: tangential loads ramped to gross slip at several
+friction coefficients, sizes, directions and normal loads, with and without image
+nuisances; rendered into a temporary folder first, about a minute): per scene and frame the
+true and estimated slip state, stick ratio, margin and friction coefficient, and the
+acceptance figures of issue 24 (docs/slip.md).
+
+Last the touch stage's time per frame (``TouchResult.timings_ms['touch']``) and its slip
+estimate's part (``['slip']``) beside the pipeline's own time per stereo pair
+(``timings_ms['total']``), measured in the same run, and the machine's load.
+Definitions: docs/touch_evaluation.md, docs/slip.md.
 """
 from __future__ import annotations
 
@@ -20,6 +29,7 @@ import argparse
 import os
 import pathlib
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -27,6 +37,7 @@ import numpy as np
 from tactile_sl_camera.elasticity import Elastomer
 from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
 from tactile_sl_decoder.tooling.bag_runs import evaluate_touch_bag
+from tactile_sl_decoder.tooling.slip_metrics import format_slip_report, slip_frames
 from tactile_sl_decoder.tooling.touch_metrics import format_report, sensor_text
 from tactile_sl_decoder.touch.sensor import SensorConfig
 
@@ -35,6 +46,29 @@ BAGS = REPO / "bags"
 # (bag, layer thickness m): E and nu as in bags/touch_scenes.yaml
 TOUCH_BAGS = (("touch_halfspace", 0.0), ("touch_layer", 0.002), ("touch_calibration", 0.0))
 CONTROL_BAG = "no_contact"
+SLIP_SCENES = BAGS / "slip_scenes.yaml"
+
+
+def render_slip_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str]
+                       ) -> list[tuple[str, pathlib.Path, SensorConfig]]:
+    """The scenes of ``scenes_file`` as bags in ``out``: (name, bag, its sensor).
+
+    ``only``: these scene names (all when empty).
+    """
+    from tactile_sl_camera.sim.scenes import load_scenes
+    from tactile_sl_camera.sim.synth import RendererCache, write_scene_bag
+
+    cache = RendererCache()
+    bags = []
+    scenes = load_scenes(scenes_file)
+    unknown = sorted(set(only) - {s.name for s in scenes})
+    if unknown:
+        raise SystemExit(f"bench_touch: no scene {', '.join(unknown)} in {scenes_file}")
+    for scene in (s for s in scenes if not only or s.name in only):
+        sys.stderr.write(f"rendering {scene.name} ({scene.frames} frames)\n")
+        path = write_scene_bag(scene, cache.get(scene), out / f"{scene.name}.mcap")
+        bags.append((scene.name, path, SensorConfig(scene.elastomer, source=str(scenes_file))))
+    return bags
 
 
 def main() -> int:
@@ -44,47 +78,76 @@ def main() -> int:
                         "is from the first pass)")
     parser.add_argument("--youngs-modulus", type=float, default=3.0e5, help="Pa")
     parser.add_argument("--poisson-ratio", type=float, default=0.49)
+    parser.add_argument("--slip-scenes", type=pathlib.Path, default=SLIP_SCENES,
+                        help="scenes with friction to render and evaluate (default: %(default)s)")
+    parser.add_argument("--no-slip", action="store_true", help="leave the slip scenes out")
+    parser.add_argument("--only", action="append", default=[], metavar="SCENE",
+                        help="render only this slip scene (repeatable; default: all)")
     args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix="bench_touch_") as tmp:
+        slip_bags = [] if args.no_slip else render_slip_scenes(args.slip_scenes,
+                                                               pathlib.Path(tmp), args.only)
+        return _run(args, slip_bags)
+
+
+def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, SensorConfig]]
+         ) -> int:
     load0 = os.getloadavg()
     pipe = StereoPipeline(PatternSpec.load(None))
-    touch_ms: list[float] = []
-    pipeline_ms: list[float] = []
-    report = None
+    times: dict[str, list[float]] = {"touch": [], "slip": [], "pipeline": []}
+    report = slip_report = None
     t0 = time.perf_counter()
     try:
         for rep in range(max(1, args.repeat)):
+            progress = sys.stderr if rep == 0 else None
             per_bag = []
             for name, thickness in TOUCH_BAGS + ((CONTROL_BAG, 0.0),):
                 sensor = SensorConfig(Elastomer(args.youngs_modulus, args.poisson_ratio,
                                                 thickness), source="bench_touch")
                 control = name == CONTROL_BAG
                 frames = evaluate_touch_bag(BAGS / f"{name}.mcap", pipe, sensor,
-                                            untouched=control,
-                                            progress=sys.stderr if rep == 0 else None)
+                                            untouched=control, progress=progress)
                 what = sensor_text(sensor) + (" (untouched control: zero truth)"
                                               if control else "")
                 per_bag.append((name, what, frames))
-                touch_ms += [f.timings_ms["touch"] for f in frames if "touch" in f.timings_ms]
-                pipeline_ms += [f.timings_ms["pipeline"] for f in frames]
+                _collect(times, frames)
+            per_scene = []
+            for name, path, sensor in slip_bags:
+                frames = evaluate_touch_bag(path, pipe, sensor, progress=progress)
+                per_scene.append((name, slip_frames(frames)))
+                _collect(times, frames)
             if report is None:
                 report = format_report(per_bag)[0]
+                slip_report = format_slip_report(per_scene) if per_scene else None
     finally:
         pipe.close()
     wall = time.perf_counter() - t0
     load1 = os.getloadavg()
     print(report)
     print()
-    t, p = np.asarray(touch_ms), np.asarray(pipeline_ms)
+    if slip_report:
+        print(f"slip ({args.slip_scenes}; truth t / estimate e; docs/slip.md):")
+        print(slip_report)
+        print()
+    t, s, p = (np.asarray(times[k]) for k in ("touch", "slip", "pipeline"))
     print(f"time per stereo frame, same run ({len(t)} frames with touch outputs over "
           f"{max(1, args.repeat)} pass(es), {wall:.1f} s; load average "
           f"{load0[0]:.2f} before, {load1[0]:.2f} after, on {os.cpu_count()} CPUs):")
     print(f"{'':<22} {'median ms':>10} {'p90 ms':>8} {'max ms':>8}")
-    for label, v in (("touch stage", t), ("pipeline (total)", p)):
+    for label, v in (("touch stage", t), ("  of which slip", s), ("pipeline (total)", p)):
         print(f"{label:<22} {np.median(v):>10.2f} {np.percentile(v, 90):>8.2f} "
               f"{v.max():>8.2f}")
     print(f"touch stage / pipeline (medians): {100 * np.median(t) / np.median(p):.1f} %; "
-          f"limit: touch stage <= 3 ms per frame")
+          f"limits: touch stage <= 3 ms, slip estimate <= 1 ms per frame")
     return 0
+
+
+def _collect(times: dict[str, list[float]], frames: list) -> None:
+    for f in frames:
+        times["pipeline"].append(f.timings_ms["pipeline"])
+        for key in ("touch", "slip"):
+            if key in f.timings_ms:
+                times[key].append(f.timings_ms[key])
 
 
 if __name__ == "__main__":

@@ -4,7 +4,7 @@ Starts the installed node executables as separate processes (what `ros2 run` run
 namespace /tactile, with localhost-only DDS and a private domain id:
 
     replay (bag -> left|right/image_raw + camera_info)
-        ->  decoder (-> points, field, wrench, contact, depth)
+        ->  decoder (-> points, field, wrench, contact, depth, slip)
 
 The default bag, bags/touch_halfspace.mcap, presses a known load (0.05 to 2 N, then sheared
 and twisted) on the simulated pad; its first frame is the untouched reference.  The replay

@@ -6,7 +6,7 @@ stay byte-identical unless a change is meant to alter them.  ``--write FILE`` re
 current tree's digests into FILE (``src/tactile_sl_decoder/test/data/points_digests.json``),
 ``src/tactile_sl_decoder/test/test_points_unchanged.py`` recomputes and compares them.
 
-Per bag and output topic (points, field, wrench, contact, depth): per message the stamp, its
+Per bag and output topic (points, field, wrench, contact, depth, slip): per message the stamp, its
 size (points / cells for the clouds, 1 otherwise) and the SHA-256 of its serialised data.
 Stamps and sizes hold on every machine (``frames``); the bytes only on the CPU model they
 were computed on (numpy and OpenCV pick SIMD code paths per CPU, which can move a float's
@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
-TOPICS = ("points", "field", "wrench", "contact", "depth")
+TOPICS = ("points", "field", "wrench", "contact", "depth", "slip")
 
 
 def cpu_model() -> str:

@@ -121,11 +121,12 @@ def test_the_checker_sees_violations(tmp_path):
     assert f"{NAME}.nodes.decoder_node" in names
 
 
-CONTRACT_NAMES = {"LABEL_UNKNOWN", "CELL_UNKNOWN", "PATCH_SIZE", "PATCH"}
+CONTRACT_NAMES = {"LABEL_UNKNOWN", "CELL_UNKNOWN", "PATCH_SIZE", "PATCH", "SLIP_NO_CONTACT",
+                  "SLIP_STICK", "SLIP_PARTIAL", "SLIP_GROSS"}
 
 
 def test_contract_numbers_have_one_definition():
-    """LABEL_UNKNOWN, CELL_UNKNOWN and the patch size are assigned in contract.py only."""
+    """LABEL_UNKNOWN, CELL_UNKNOWN, the patch size and the slip states: contract.py only."""
     bad = []
     for path in sorted(PKG.rglob("*.py")):
         if path.name == "contract.py" and path.parent == PKG:
@@ -143,6 +144,14 @@ def test_contract_mirrors_the_symbol_array_message():
     from tactile_sl_msgs import msg
     assert contract.LABEL_UNKNOWN == msg.SymbolArray.LABEL_UNKNOWN
     assert contract.CELL_UNKNOWN == msg.SymbolArray.CELL_UNKNOWN
+
+
+def test_contract_mirrors_the_slip_message():
+    from tactile_sl_decoder import contract
+    from tactile_sl_msgs import msg
+    assert (contract.SLIP_NO_CONTACT, contract.SLIP_STICK, contract.SLIP_PARTIAL,
+            contract.SLIP_GROSS) == (msg.Slip.STATE_NO_CONTACT, msg.Slip.STATE_STICK,
+                                     msg.Slip.STATE_PARTIAL_SLIP, msg.Slip.STATE_GROSS_SLIP)
 
 
 SOURCE_ROOTS = {"tactile_sl_decoder": REPO / "src" / "tactile_sl_decoder",

@@ -1,6 +1,6 @@
 """The points and touch outputs of every bundled bag are byte-identical to those recorded.
 
-``data/points_digests.json`` holds, per bag and output topic (points, field, wrench,
+``data/points_digests.json`` holds, per bag and output topic (points, field, wrench, slip,
 contact, depth), every message's stamp, size and the SHA-256 of its data as ``tactile-sl
 replay`` wrote them (``python tools/points_digest.py --write ...``).  History: recorded on
 the tree before the layout change (issue 9, commit 3f1d4a6), again when glyphs split out of
@@ -13,7 +13,8 @@ dark object's rim (robust_dark_object's points moved); with touch outputs and pe
 since 2026-12-02 (issue 29), when the right-sized classifier became the default
 (robust_damaged_print gained two cells in two frames, checked against the ground truth:
 coverage 99.39 -> 99.48 %, 0 wrong; every other bag byte-identical, and every bag with the
-LeNet weights).  A change that alters any output, even in the last bit, fails here; when a
+LeNet weights), and when the two slip bags were added (issue 24: slip_halfspace,
+slip_two_contacts).  A change that alters any output, even in the last bit, fails here; when a
 change is *meant* to alter them (a better decoder), record the digests again and say so in
 the commit.
 

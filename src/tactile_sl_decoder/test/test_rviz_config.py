@@ -18,6 +18,7 @@ def test_rviz_config_shows_cloud_and_touch_topics_and_is_installed():
     assert displays["/tactile/wrench"] == "rviz_default_plugins/Wrench"
     assert displays["/tactile/depth"] == "rviz_default_plugins/Image"
     assert displays["/tactile/pad_pose"] == "rviz_default_plugins/Pose"
+    assert displays["/tactile/slip_markers"] == "rviz_default_plugins/MarkerArray"
     assert manager["Global Options"]["Fixed Frame"] == "tactile_left_optical_frame"
     assert 'glob("rviz/*.rviz")' in (PKG / "setup.py").read_text()
     launch = PKG / "launch" / "tactile_sl.launch.py"

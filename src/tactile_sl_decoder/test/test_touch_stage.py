@@ -64,13 +64,19 @@ def test_messages_carry_the_contract_fields(stage):
         stage.update(_points(_displacement(stage.sensor.elastomer, [], 2e-6, rng)))
     out = stage.update(_points(_displacement(stage.sensor.elastomer, [], 2e-6, rng)))
     msgs = {topic: fields for topic, _type, fields in touch_messages(out, (12, 34), "pad")}
-    assert set(msgs) == {"field", "wrench", "contact", "depth"}
+    assert set(msgs) == {"field", "wrench", "contact", "depth", "slip"}
     names = [f["name"] for f in msgs["field"]["fields"]]
     assert names[:8] == ["x", "y", "z", "dx", "dy", "dz", "row", "col"]
     assert {"fx", "fy", "fz"} <= set(names)
     assert msgs["wrench"]["header"] == {"stamp": {"sec": 12, "nanosec": 34}, "frame_id": "pad"}
     assert msgs["contact"]["in_contact"] is False
     assert msgs["depth"]["encoding"] == "32FC1"
+    slip = msgs["slip"]     # untouched: no contact, NaN where the contract says, no direction
+    assert list(slip)[:7] == ["header", "state", "stick_ratio", "slip_margin",
+                              "friction_coefficient", "direction", "centroid"]
+    assert slip["state"] == 0 and slip["header"] == msgs["wrench"]["header"]
+    assert all(np.isnan(slip[k]) for k in ("stick_ratio", "slip_margin", "friction_coefficient"))
+    assert slip["direction"] == {"x": 0.0, "y": 0.0, "z": 0.0}
 
 
 def test_bad_settings_are_refused():

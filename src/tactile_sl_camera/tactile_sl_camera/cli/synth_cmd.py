@@ -17,8 +17,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Render each scene of SCENES.yaml as a rosbag2-compatible MCAP bag "
         "DIR/<scene>.mcap with /tactile/{left,right}/{image_raw,camera_info} and "
         "/tactile/ground_truth/points; scenes with load contacts (known forces) add "
-        "/tactile/ground_truth/{wrench,field,contact} in the pad frame. Deterministic: the "
-        "same file gives the same bytes.")
+        "/tactile/ground_truth/{wrench,field,contact} in the pad frame (and "
+        "/tactile/ground_truth/slip with friction). Deterministic: the same file gives the "
+        "same bytes.")
     p.add_argument("scenes", nargs="?", help="scenes YAML file (see docs/camera.md)")
     p.add_argument("-o", "--output", default=".", help="output directory (default: .)")
     p.add_argument("--artwork", default=None,

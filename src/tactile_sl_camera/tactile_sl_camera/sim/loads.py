@@ -6,8 +6,10 @@ mz (N m) about the disc's normal. Its traction (Pa) on the simulator's field gri
 
 * normal: p(r) = p0 sqrt(1 - r^2/a^2) (``hertz``, the pressure under a sphere: K.L. Johnson,
   Contact Mechanics, 1985, eq. 4.20) or uniform (``uniform``), scaled so that it sums to fz;
-* tangential: the same profile scaled to (fx, fy) (full stick, the simplest load a sensor
-  calibration cares about);
+* tangential: the same profile scaled to (fx, fy) (the simplest load a sensor calibration
+  cares about), or, with a friction coefficient (``friction`` > 0, Hertz only), the
+  Cattaneo-Mindlin traction of partial or gross slip (:mod:`.friction`): a tangential load
+  beyond mu P is not transmitted (the object slides);
 * torsion: a circumferential traction q_theta = c r sqrt(1 - r^2/a^2) (``hertz``; c r for
   ``uniform``, rigid-rotation-like), scaled so that its moment about the centre is mz.
 
@@ -26,6 +28,14 @@ import numpy as np
 from scipy import ndimage
 
 from ..elasticity import Elastomer
+from .friction import (
+    STATE_NO_CONTACT,
+    STATE_PARTIAL_SLIP,
+    ContactSlip,
+    cattaneo_mindlin,
+    slip_from_message,
+    tangential_traction,
+)
 
 if TYPE_CHECKING:  # typing.TypeIs is Python 3.13; annotations are not evaluated at run time
     from typing_extensions import TypeIs
@@ -45,6 +55,7 @@ class LoadContact:
     force: tuple[float, float, float] = (0.0, 0.0, 0.0)
     torque: float = 0.0
     elastomer: Elastomer = DEFAULT_ELASTOMER
+    friction: float = 0.0   # mu; 0 = no friction model (the tangential profile as above)
 
     kind = "load"
 
@@ -65,44 +76,85 @@ class LoadContact:
             raise ValueError(f"load torque must be finite, got {self.torque}")
         if not isinstance(self.elastomer, Elastomer):
             raise ValueError("load elastomer must be an Elastomer")
+        if not np.isfinite(self.friction) or self.friction < 0:
+            raise ValueError(f"load friction must be a finite number >= 0, got {self.friction}")
+        if self.friction > 0 and self.profile != "hertz":
+            raise ValueError("load friction needs profile hertz (Cattaneo-Mindlin slip of a "
+                             "Hertz contact)")
+        if self.friction > 0 and self.torque != 0:
+            raise ValueError("load friction with torque is not modelled (torsional slip)")
         self.force = (float(f[0]), float(f[1]), float(f[2]))
+
+    @property
+    def slip(self) -> ContactSlip | None:
+        """Cattaneo-Mindlin state of a load with friction (None without a friction model)."""
+        if self.friction <= 0:
+            return None
+        return cattaneo_mindlin(self.force, self.friction, self.radius, (self.x, self.y))
+
+    @property
+    def applied_force(self) -> tuple[float, float, float]:
+        """The force the contact transmits: the requested one, tangential part capped at mu P."""
+        slip = self.slip
+        if slip is None:
+            return self.force
+        return (slip.transmitted[0], slip.transmitted[1], self.force[2])
 
     @property
     def active(self) -> bool:
         return bool(np.any(np.asarray(self.force) != 0) or self.torque != 0)
 
-    def shape(self, X: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Profile weight w(r) >= 0 (zero outside the disc) and r, at rest points."""
+    def shape(self, X: np.ndarray, Y: np.ndarray, radius: float | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """Profile weight w(r) >= 0 (zero outside the disc) and r, at rest points.
+
+        ``radius`` (default the load's) draws the same profile on a smaller disc (the stick
+        disc of a load in partial slip).
+        """
+        radius = self.radius if radius is None else radius
         r = np.hypot(X - self.x, Y - self.y)
-        inside = r < self.radius
+        inside = r < radius
         if self.profile == "hertz":
-            w = np.sqrt(np.clip(1.0 - (r / self.radius) ** 2, 0.0, None))
+            w = np.sqrt(np.clip(1.0 - (r / radius) ** 2, 0.0, None))
         else:
             w = inside.astype(np.float64)
         return np.where(inside, w, 0.0), r
+
+    def _centred(self, w: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+        """``w`` tilted by a tiny linear factor so that its centroid on the grid is the centre."""
+        m = np.array([[(w * dx * dx).sum(), (w * dx * dy).sum()],
+                      [(w * dx * dy).sum(), (w * dy * dy).sum()]])
+        if np.linalg.cond(m) < 1e12:
+            a, b = np.linalg.solve(m, -np.array([(w * dx).sum(), (w * dy).sum()]))
+            w = w * (1.0 + a * dx + b * dy)
+        return w
 
     def traction(self, X: np.ndarray, Y: np.ndarray, cell_area: float) -> np.ndarray:
         """(..., 3) traction (Pa) at grid nodes whose forces (times ``cell_area``) sum exactly.
 
         The sampled profile is tilted by a tiny linear factor so that its centroid on the
         grid is exactly the disc's centre: the resultant and its moment are then exactly the
-        requested ones, whatever the grid.
+        requested ones (:attr:`applied_force`, with friction), whatever the grid.
         """
         w, r = self.shape(X, Y)
         if w.sum() <= 0:
             raise ValueError(f"load disc of radius {self.radius} m at ({self.x}, {self.y}) m "
                              "covers no node of the field grid (too small or off the grid)")
         dx, dy = X - self.x, Y - self.y
-        m = np.array([[(w * dx * dx).sum(), (w * dx * dy).sum()],
-                      [(w * dx * dy).sum(), (w * dy * dy).sum()]])
-        if np.linalg.cond(m) < 1e12:
-            a, b = np.linalg.solve(m, -np.array([(w * dx).sum(), (w * dy).sum()]))
-            w = w * (1.0 + a * dx + b * dy)
+        w = self._centred(w, dx, dy)
         total = w.sum() * cell_area
         out = np.zeros(np.shape(X) + (3,))
-        for i in range(3):
+        slip = self.slip
+        for i in range(3) if slip is None else (2,):
             if self.force[i]:
                 out[..., i] = self.force[i] * w / total
+        if slip is not None:
+            stick = None
+            if slip.state == STATE_PARTIAL_SLIP:
+                c, _ = self.shape(X, Y, self.radius * float(np.sqrt(slip.stick_ratio)))
+                stick = self._centred(c, dx, dy) if c.sum() > 0 else None
+            out[..., :2] = tangential_traction(-out[..., 2], stick, slip, self.friction,
+                                               cell_area)
         if self.torque:
             # q = c w (-dy, dx), |q| = c r w(r) (the profiles above); zero net force as w is
             # centred; c makes the moment sum(dx q_y - dy q_x) A = c sum(w r^2) A equal mz
@@ -157,6 +209,7 @@ class TouchTruth:
     region_force: np.ndarray = field(default_factory=lambda: np.zeros(0))  # N
     region_area: np.ndarray = field(default_factory=lambda: np.zeros(0))  # m^2
     region_centroid: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # m
+    slip: ContactSlip | None = None  # of the load pressing hardest; None: no friction model
     rows: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     cols: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     position: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # m, current
@@ -164,15 +217,34 @@ class TouchTruth:
 
 
 def resultant(loads: list[LoadContact]) -> tuple[np.ndarray, np.ndarray]:
-    """Requested resultant force and moment about the pad origin: M = sum r x f + torsion."""
+    """Resultant force and moment about the pad origin: M = sum r x f + torsion.
+
+    The requested forces, but a load in gross slip transmits only mu P sideways.
+    """
     force = np.zeros(3)
     moment = np.zeros(3)
     for load in loads:
-        f = np.asarray(load.force, dtype=np.float64)
+        f = np.asarray(load.applied_force, dtype=np.float64)
         force += f
         moment += np.cross([load.x, load.y, 0.0], f)
         moment[2] += load.torque
     return force, moment
+
+
+def strongest_slip(loads: Sequence[LoadContact]) -> ContactSlip | None:
+    """Slip truth of a frame: that of the load with the largest normal force (the contract's).
+
+    None when no load has a friction model; no contact when no load presses; None when the
+    load pressing hardest has no friction model (its slip is not defined).
+    """
+    if not any(load.friction > 0 for load in loads):
+        return None
+    pressing = [load for load in loads if load.force[2] < 0]
+    if not pressing:
+        return ContactSlip(STATE_NO_CONTACT, float("nan"), float("nan"), float("nan"),
+                           (0.0, 0.0, 0.0), (0.0, 0.0))
+    strongest = max(pressing, key=lambda load: -load.force[2])
+    return strongest.slip
 
 
 def touch_truth(contacts: Sequence[object], traction: np.ndarray, uz: np.ndarray, xs: np.ndarray,
@@ -190,7 +262,7 @@ def touch_truth(contacts: Sequence[object], traction: np.ndarray, uz: np.ndarray
     p = np.clip(-traction[..., 2], 0.0, None)
     pressed = p > 0
     total = float(p.sum() * area_cell)
-    t = TouchTruth(force=force, moment=moment)
+    t = TouchTruth(force=force, moment=moment, slip=strongest_slip(loads))
     t.rows, t.cols, t.position, t.displacement = visible
     t.max_depth = float(max(0.0, -float(uz.min(initial=0.0))))
     t.shear_force = np.array([traction[..., 0].sum() * area_cell,
@@ -226,12 +298,13 @@ def _xyz(v: object) -> np.ndarray:
     return np.array([float(get("x")), float(get("y")), float(get("z"))])
 
 
-def touch_truth_from_messages(wrench: object | None, field_cloud: object, contact: object
-                              ) -> TouchTruth:
+def touch_truth_from_messages(wrench: object | None, field_cloud: object, contact: object,
+                              slip: object | None = None) -> TouchTruth:
     """The :class:`TouchTruth` of one frame from its ``ground_truth/{wrench,field,contact}``.
 
     Accepts bag-decoded or rclpy messages (``wrench`` None where the bag has none: a frame
-    with geometric indenters), so an evaluation reads bags and renders alike.
+    with geometric indenters; ``slip`` its ``ground_truth/slip``, None without friction),
+    so an evaluation reads bags and renders alike.
     """
     from ..clouds import FIELD_DTYPE, cloud_to_arrays
 
@@ -251,6 +324,7 @@ def touch_truth_from_messages(wrench: object | None, field_cloud: object, contac
         region_area=np.asarray(c.region_area, dtype=np.float64),  # type: ignore[attr-defined]
         region_centroid=np.array([_xyz(p) for p in c.region_centroid]  # type: ignore
                                  ).reshape(-1, 3),
+        slip=None if slip is None else slip_from_message(slip),
         rows=cells["row"].astype(np.int64), cols=cells["col"].astype(np.int64),
         position=np.stack([cells["x"], cells["y"], cells["z"]], axis=1).astype(np.float64),
         displacement=np.stack([cells["dx"], cells["dy"], cells["dz"]], axis=1

@@ -22,8 +22,11 @@ edge, flat), radius, length, angle_deg, fillet. Keyframe keys: frame, depth, x, 
 shear [sx, sy], angle_deg.
 
 Load contacts (known tractions, see ``loads.py``): indenter ``{kind: load, radius, profile:
-hertz | uniform}``, keyframe keys frame, x, y, force [fx, fy, fz] (N, pad frame, fz <= 0
-presses), torque (N m about the disc's normal)::
+hertz | uniform, friction}``, keyframe keys frame, x, y, force [fx, fy, fz] (N, pad frame,
+fz <= 0 presses), torque (N m about the disc's normal). ``friction`` (mu > 0, Hertz loads
+without torque; on every load of the scene or on none) gives the tangential load
+Cattaneo-Mindlin partial slip, and gross slip beyond mu P (``friction.py``; ground truth
+``ground_truth/slip``)::
 
       - indenter: {kind: load, radius: 0.004, profile: hertz}
         keyframes:
@@ -52,7 +55,7 @@ SCENE_KEYS = {"name", "frames", "fps", "seed", "encoding", "start_time", "supers
               "artwork", "description", "elastomer"}
 INDENTER_KEYS = {"kind", "radius", "length", "angle_deg", "fillet"}
 KEYFRAME_KEYS = {"frame", "depth", "x", "y", "shear", "angle_deg"}
-LOAD_KEYS = {"kind", "radius", "profile"}
+LOAD_KEYS = {"kind", "radius", "profile", "friction"}
 LOAD_KEYFRAME_KEYS = {"frame", "x", "y", "force", "torque"}
 ELASTOMER_KEYS = {"youngs_modulus", "poisson_ratio", "thickness"}
 DEFAULT_START_TIME = 1_700_000_000
@@ -131,7 +134,8 @@ class ContactTrack:
                                profile=str(self.indenter.get("profile", "hertz")),
                                x=float(s["x"]), y=float(s["y"]),
                                force=tuple(float(v) for v in s["force"]),  # type: ignore
-                               torque=float(s["torque"]), elastomer=elastomer)
+                               torque=float(s["torque"]), elastomer=elastomer,
+                               friction=float(self.indenter.get("friction", 0.0)))
         return Contact(kind=str(self.indenter.get("kind", "sphere")),
                        radius=float(self.indenter.get("radius", 0.005)),
                        length=float(self.indenter.get("length", 0.0)),
@@ -230,6 +234,10 @@ def parse_scene(doc: dict[str, Any], where: str = "scene") -> Scene:
         raise SceneError(f"{where}: encoding must be mono8 or bgr8, not {scene.encoding!r}")
     for i, c in enumerate(doc.get("contacts") or []):
         scene.contacts.append(_parse_contact(c, scene, f"{where} contact {i}"))
+    frictional = {bool(t.indenter.get("friction")) for t in scene.contacts if t.is_load}
+    if len(frictional) > 1:
+        raise SceneError(f"{where}: friction must be set on every load contact of the scene "
+                         "or on none (the slip truth is that of the load pressing hardest)")
     return scene
 
 

@@ -19,6 +19,7 @@ from ..clouds import cloud_fields, pack_field, pack_points
 from ..images import image_fields
 from .artwork import load_artwork
 from .contact import Contact
+from .friction import ContactSlip
 from .loads import TouchTruth
 from .optics import SimulatedCameraPair
 from .render import Nuisances, Renderer, StereoFrame
@@ -31,6 +32,7 @@ INFO = "sensor_msgs/msg/CameraInfo"
 CLOUD = "sensor_msgs/msg/PointCloud2"
 WRENCH = "geometry_msgs/msg/WrenchStamped"
 CONTACT = "tactile_sl_msgs/msg/Contact"
+SLIP = "tactile_sl_msgs/msg/Slip"
 PAD_FRAME = "tactile_pad"
 
 
@@ -92,7 +94,10 @@ def _vec(v: np.ndarray) -> dict[str, float]:
 
 def touch_messages(touch: TouchTruth | None, stamp: tuple[int, int], frame_id: str
                    ) -> list[tuple[str, str, dict[str, Any]]]:
-    """Touch ground truth of a load scene's frame: wrench (all-load frames), field, contact."""
+    """Touch ground truth of a load scene's frame: wrench (all-load frames), field, contact.
+
+    With friction (``friction`` on the loads) also ``ground_truth/slip``.
+    """
     if touch is None:
         raise ValueError("a frame of a load scene has no touch ground truth")
     header = {"stamp": {"sec": stamp[0], "nanosec": stamp[1]}, "frame_id": frame_id}
@@ -113,7 +118,22 @@ def touch_messages(touch: TouchTruth | None, stamp: tuple[int, int], frame_id: s
         "region_force": [float(v) for v in touch.region_force],
         "region_area": [float(v) for v in touch.region_area],
         "region_centroid": [_vec(c) for c in touch.region_centroid]}))
+    if touch.slip is not None:
+        out.append(("ground_truth/slip", SLIP, slip_truth_fields(touch.slip, header)))
     return out
+
+
+def slip_truth_fields(slip: ContactSlip, header: dict[str, Any]) -> dict[str, Any]:
+    """tactile_sl_msgs/Slip of a frame's slip truth (NaN where the contract says)."""
+    c = slip.centre
+    return {"header": header, "state": int(slip.state),
+            "stick_ratio": float(slip.stick_ratio), "slip_margin": float(slip.margin),
+            "friction_coefficient": float(slip.friction),
+            "direction": _vec(np.asarray(slip.direction, np.float64)),
+            "centroid": {"x": float(c[0]), "y": float(c[1]), "z": 0.0},
+            "contact_radius": float(slip.radius), "stick_radius": float(slip.stick_radius),
+            "normal_force": float(slip.normal_force),
+            "tangential_force": float(np.hypot(*slip.transmitted)), "fit_residual": 0.0}
 
 
 def iter_scene(scene: Scene, renderer: Renderer, ids: FrameIds | None = None

@@ -195,6 +195,8 @@ def e2e_section(args: argparse.Namespace, bags: list[Path]) -> str:
 def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
     """Touch figures (displacement, force, moment, contact) of bags with touch ground truth.
 
+    Bags with ``ground_truth/slip`` add the slip table and its acceptance figures.
+
     Reads ``args.sensor``, ``args.reference_frames``, ``args.pattern``, ``args.weights``,
     ``args.namespace``, ``args.max_frames``, ``args.totals_only`` and ``args.json`` (figures
     also written to ``<json stem>.touch.json``) when present.
@@ -204,6 +206,7 @@ def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
     from tactile_sl_camera.bag_io import BagError
     from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
     from tactile_sl_decoder.tooling.bag_runs import evaluate_touch_bag
+    from tactile_sl_decoder.tooling.slip_metrics import format_slip_report, slip_frames
     from tactile_sl_decoder.tooling.touch_metrics import (
         LIMITS,
         format_report,
@@ -238,6 +241,11 @@ def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
         finally:
             pipe.close()
         text, totals = format_report(per_bag, bool(getattr(args, "totals_only", False)))
+        slips = [(name, slip_frames(frames)) for name, _, frames in per_bag]
+        slips = [(name, frames) for name, frames in slips if frames]
+        if slips:           # bags with ground_truth/slip (scenes with friction)
+            text += ("\n\nSlip (truth t / estimate e, contact pressing hardest; "
+                     "docs/slip.md):\n" + format_slip_report(slips))
         skipped = [Path(b).stem for b in bags if b not in touch_bags]
         if skipped:
             text += f"\n(no touch ground truth, not in the touch figures: {', '.join(skipped)})"

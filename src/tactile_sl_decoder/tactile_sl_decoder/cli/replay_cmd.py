@@ -4,7 +4,8 @@ Runs the same :class:`~tactile_sl_decoder.pipeline.StereoPipeline` and
 :class:`~tactile_sl_decoder.touch.stage.TouchStage` as the ``decoder`` node over every stereo
 frame of a bag and writes ``/tactile/points`` (contract PointCloud2) for each frame that
 produced at least one point, and the touch outputs (``field``, ``wrench``, ``contact``,
-``depth``) for every frame after the reference, all stamped exactly like their input frame.
+``depth``, ``slip``) for every frame after the reference, all stamped exactly like their
+input frame.
 """
 from __future__ import annotations
 
@@ -42,7 +43,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--reference-frames", type=number(int, 1, 1000), default=1, metavar="N",
                    help="the first N decoded frames are the untouched reference (default 1)")
     p.add_argument("--no-touch", action="store_true",
-                   help="write only /tactile/points (no field, wrench, contact, depth)")
+                   help="write only /tactile/points (no field, wrench, contact, depth, slip)")
     p.add_argument("--namespace", default="/tactile", help="topic namespace of the bag")
     p.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     p.set_defaults(func=run)

@@ -7,9 +7,10 @@ Subscribes (relative names, sensor-data QoS)::
     always        : left/camera_info, right/camera_info      (sensor_msgs/CameraInfo)
 
 Publishes ``points`` (sensor_msgs/PointCloud2, one per stereo frame, stamped exactly like
-the left image), the touch outputs ``field``, ``wrench``, ``contact``, ``depth`` and
-``pad_pose`` (see :mod:`.touch_outputs`; service ``tare``) and, for inspection,
-``left/symbols_decoded`` / ``right/symbols_decoded`` (labelled and decoded SymbolArrays).
+the left image), the touch outputs ``field``, ``wrench``, ``contact``, ``depth``, ``slip``
+(with ``slip_markers`` for RViz) and ``pad_pose`` (see :mod:`.touch_outputs`; service
+``tare``) and, for inspection, ``left/symbols_decoded`` / ``right/symbols_decoded``
+(labelled and decoded SymbolArrays).
 All the work is done by the shared :class:`~tactile_sl_decoder.pipeline.StereoPipeline`,
 so ``tactile-sl replay`` on a bag gives
 the same points.  Bad input (encodings, sizes, CameraInfo, unsynchronised stereo, empty
@@ -162,7 +163,7 @@ class DecoderNode(Node):
                              "subscriptions (depth: input_depth)", input_depth, "best_effort",
                              fixed=("depth",))
         out_qos = declare_qos(self.params, "output", "points, left|right/symbols_decoded and "
-                              "the touch outputs field, wrench, contact, depth", 5)
+                              "the touch outputs field, wrench, contact, depth, slip", 5)
         self.pub_points = self.create_publisher(PointCloud2, "points", out_qos)
         self.touch = TouchOutputs(self, pattern.array.shape, pattern.pitch_m,
                                   params.decode.mirrored, out_qos)

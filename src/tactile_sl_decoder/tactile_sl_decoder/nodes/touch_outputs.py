@@ -2,6 +2,7 @@
 
 Publishes (relative names, reliable, depth 5; pad frame): ``field`` (PointCloud2),
 ``wrench`` (WrenchStamped), ``contact`` (tactile_sl_msgs/Contact), ``depth`` (Image 32FC1),
+``slip`` (tactile_sl_msgs/Slip), ``slip_markers`` (visualization_msgs/MarkerArray, for RViz),
 and ``pad_pose`` (PoseStamped of the pad frame in the left optical frame, transient local,
 plus ``/tf_static`` when tf2_ros is importable, i.e. on a system ROS install).  The work is
 :class:`tactile_sl_decoder.touch.stage.TouchStage`; message fields come from
@@ -16,7 +17,9 @@ import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, Vector3, WrenchStamped
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Image, PointCloud2
+from std_msgs.msg import ColorRGBA
 from std_srvs.srv import Trigger
+from visualization_msgs.msg import Marker, MarkerArray
 
 from tactile_sl_camera.nodes.camera_common import apply_header, cloud_msg, image_msg
 from tactile_sl_camera.nodes.parameters import declare_qos
@@ -25,6 +28,8 @@ from tactile_sl_decoder.touch.messages import (
     depth_fields,
     field_fields,
     pose_fields,
+    slip_fields,
+    slip_markers,
     wrench_fields,
 )
 from tactile_sl_decoder.touch.reference import ReferenceError
@@ -35,9 +40,9 @@ if TYPE_CHECKING:   # the one node that owns these outputs (imports this module 
     from tactile_sl_decoder.nodes.decoder_node import DecoderNode
 
 try:
-    from tactile_sl_msgs.msg import Contact
+    from tactile_sl_msgs.msg import Contact, Slip
 except ImportError:  # pragma: no cover - interfaces not built
-    Contact = None
+    Contact = Slip = None
 
 try:  # only on a system ROS install (tf2_ros is not a wheel)
     from geometry_msgs.msg import TransformStamped
@@ -85,6 +90,40 @@ def contact_msg(fields: dict[str, Any]) -> Any:
     return msg
 
 
+def slip_msg(fields: dict[str, Any]) -> Any:
+    """Slip from :func:`~tactile_sl_decoder.touch.messages.slip_fields`."""
+    msg = Slip()
+    apply_header(msg, fields)
+    for key in ("state", "stick_ratio", "slip_margin", "friction_coefficient", "contact_radius",
+                "stick_radius", "normal_force", "tangential_force", "fit_residual"):
+        setattr(msg, key, fields[key])
+    msg.direction = _vec(Vector3, fields["direction"])
+    msg.centroid = _vec(Point, fields["centroid"])
+    return msg
+
+
+def markers_msg(markers: list[dict[str, Any]], fields: dict[str, Any]) -> MarkerArray:
+    """MarkerArray from :func:`~tactile_sl_decoder.touch.messages.slip_markers`.
+
+    The markers take the header of ``fields`` (the slip message's) and namespace ``slip``.
+    """
+    out = MarkerArray()
+    for m in markers:
+        msg = Marker()
+        apply_header(msg, fields)
+        msg.ns, msg.id, msg.type, msg.action = "slip", m["id"], m["type"], m["action"]
+        if "position" in m:
+            msg.pose.position = _vec(Point, m["position"])
+            o = m["orientation"]
+            msg.pose.orientation.x, msg.pose.orientation.y = o["x"], o["y"]
+            msg.pose.orientation.z, msg.pose.orientation.w = o["z"], o["w"]
+            msg.scale = _vec(Vector3, m["scale"])
+            r, g, b, a = m["color"]
+            msg.color = ColorRGBA(r=float(r), g=float(g), b=float(b), a=float(a))
+        out.markers.append(msg)
+    return out
+
+
 def pose_msg(fields: dict[str, Any]) -> PoseStamped:
     """PoseStamped from :func:`~tactile_sl_decoder.touch.messages.pose_fields`."""
     msg = PoseStamped()
@@ -105,9 +144,9 @@ class TouchOutputs:
         self.shape, self.pitch = shape, pitch
         live = node.params         # the node's one parameter mechanism
         ref = " The reference is taken with it."
-        enabled = live.declare("touch", True, "Publish field, wrench, contact, depth and "
-                               "pad_pose (needs an untouched pad at start: the reference).",
-                               read_only=True)
+        enabled = live.declare("touch", True, "Publish field, wrench, contact, depth, slip "
+                               "and pad_pose (needs an untouched pad at start: the "
+                               "reference).", read_only=True)
         sensor_file = live.declare("sensor_file", "", "Sensor YAML (elastomer, pad frame); "
                                    "empty = the shipped one.", read_only=True)
         reference_frames = live.declare(
@@ -167,6 +206,8 @@ class TouchOutputs:
         self.pub_wrench = node.create_publisher(WrenchStamped, "wrench", out_qos)
         self.pub_contact = node.create_publisher(Contact, "contact", out_qos)
         self.pub_depth = node.create_publisher(Image, "depth", out_qos)
+        self.pub_slip = node.create_publisher(Slip, "slip", out_qos)
+        self.pub_markers = node.create_publisher(MarkerArray, "slip_markers", out_qos)
         latched = declare_qos(live, "pad_pose", "pad_pose (latched: late joiners get the pad "
                               "frame)", 1, "reliable", "transient_local")
         self.pub_pose = node.create_publisher(PoseStamped, "pad_pose", latched)
@@ -277,6 +318,12 @@ class TouchOutputs:
             self.pub_contact.publish(contact_msg(contact_fields(result.contact, stamp, f)))
         if self.pub_depth.get_subscription_count():
             self.pub_depth.publish(image_msg(depth_fields(result.depth, stamp, f)))
+        if self.pub_slip.get_subscription_count() or self.pub_markers.get_subscription_count():
+            slip = slip_fields(result.slip, stamp, f)
+            if self.pub_slip.get_subscription_count():
+                self.pub_slip.publish(slip_msg(slip))
+            if self.pub_markers.get_subscription_count():
+                self.pub_markers.publish(markers_msg(slip_markers(result.slip), slip))
 
     def _announce_reference(self, stamp: tuple[int, int], camera_frame: str) -> None:
         ref = self.stage.reference

@@ -88,7 +88,8 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
 
     Frames used for the reference give no figures.  ``untouched``: the bag has no touch
     ground truth and the pad is at rest throughout (a control: zero truth).
-    Timings per frame: ``pipeline`` (the pipeline's total) and ``touch`` (the stage's).
+    Timings per frame: ``pipeline`` (the pipeline's total), ``touch`` (the stage's) and
+    ``slip`` (the slip estimate's part of it).
     """
     from tactile_sl_camera.images import to_gray
     from tactile_sl_decoder.frames import bag_frames, count_bag_frames
@@ -126,6 +127,7 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
         m.timings_ms = {"pipeline": float(result.timings_ms.get("total", NAN))}
         if touch is not None:
             m.timings_ms["touch"] = float(touch.timings_ms.get("touch", NAN))
+            m.timings_ms["slip"] = float(touch.timings_ms.get("slip", NAN))
         out.append(m)
     if progress is not None:
         progress.write("\n")

@@ -64,6 +64,8 @@ class TouchFrameMetrics:
     contact_true: bool
     untouched: bool                # no traction at all in the truth
     timings_ms: dict[str, float] = field(default_factory=dict)
+    slip_est: Any = None           # the stage's SlipEstimate (None: no output)
+    slip_true: Any = None          # the truth's ContactSlip (None: no friction model)
 
     # ------------------------------------------------------------ errors (est - true)
 
@@ -247,7 +249,9 @@ def compare_frame(result: Any | None, truth: Any | None, bag: str = "", stamp_ns
         bag, stamp_ns, True, cells, rmse, np.asarray(result.wrench_force, np.float64),
         force_true, np.asarray(result.wrench_moment, np.float64), moment_true,
         np.asarray(c.centroid, np.float64)[:2], centroid_true, float(c.area), area_true,
-        float(c.max_depth), depth_true, bool(c.in_contact), contact_true, untouched)
+        float(c.max_depth), depth_true, bool(c.in_contact), contact_true, untouched,
+        slip_est=getattr(result, "slip", None),
+        slip_true=None if truth is None else getattr(truth, "slip", None))
 
 
 # ---------------------------------------------------------------------- bags
@@ -261,18 +265,22 @@ def has_touch_truth(path: str | Path, namespace: str = "/tactile") -> bool:
 
 
 def read_truths(path: str | Path, namespace: str = "/tactile") -> dict[int, Any]:
-    """``TouchTruth`` of every frame of a bag by header stamp (ns), from its ground truth."""
+    """``TouchTruth`` of every frame of a bag by header stamp (ns), from its ground truth.
+
+    With ``ground_truth/slip`` (scenes with friction) the truth carries the slip state.
+    """
     from tactile_sl_camera.bag_io import BagReader, stamp_to_ns
     from tactile_sl_camera.sim.loads import touch_truth_from_messages
 
     ns = namespace.rstrip("/")
-    names = {f"{ns}/ground_truth/{k}": k for k in ("wrench", "field", "contact")}
+    names = {f"{ns}/ground_truth/{k}": k for k in ("wrench", "field", "contact", "slip")}
     reader = BagReader(path)
     parts: dict[int, dict[str, Any]] = {}
     for raw, msg in reader.messages([t for t in names if t in reader.topics]):
         s = msg.header.stamp
         parts.setdefault(stamp_to_ns(s.sec, s.nanosec), {})[names[raw.topic]] = msg
-    return {stamp: touch_truth_from_messages(p.get("wrench"), p["field"], p["contact"])
+    return {stamp: touch_truth_from_messages(p.get("wrench"), p["field"], p["contact"],
+                                             p.get("slip"))
             for stamp, p in parts.items() if "field" in p and "contact" in p}
 
 

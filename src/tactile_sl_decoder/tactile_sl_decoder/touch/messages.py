@@ -5,13 +5,16 @@ and copied into rclpy messages by the decoder node, so both give the same bytes.
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from tactile_sl_camera.clouds import cloud_fields, pack_field
+from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_NO_CONTACT, SLIP_PARTIAL, SLIP_STICK
 from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.reference import PadPose
+from tactile_sl_decoder.touch.slip import SlipEstimate
 from tactile_sl_decoder.touch.stage import TouchResult
 
 Stamp = tuple[int, int]
@@ -55,6 +58,74 @@ def contact_fields(state: ContactState, stamp: Stamp, frame_id: str) -> dict[str
             "region_centroid": [_xyz(c) for c in state.region_centroid]}
 
 
+def slip_fields(slip: SlipEstimate, stamp: Stamp, frame_id: str) -> dict[str, Any]:
+    """tactile_sl_msgs/Slip: the contract's fields in its order, then the additions."""
+    return {"header": header(stamp, frame_id),
+            "state": int(slip.state),
+            "stick_ratio": float(slip.stick_ratio),
+            "slip_margin": float(slip.margin),
+            "friction_coefficient": float(slip.friction),
+            "direction": _xyz(slip.direction),
+            "centroid": _xyz(slip.centroid),
+            "contact_radius": float(slip.contact_radius),
+            "stick_radius": float(slip.stick_radius),
+            "normal_force": float(slip.normal_force),
+            "tangential_force": float(slip.tangential_force),
+            "fit_residual": float(slip.fit_residual)}
+
+
+# RGBA of the contact disc per state (partial slip: yellow with margin 1 to red at 0)
+_STICK_RGBA = (0.15, 0.8, 0.25, 0.5)
+_GROSS_RGBA = (0.9, 0.1, 0.1, 0.6)
+_UNKNOWN_RGBA = (0.6, 0.6, 0.6, 0.5)
+MARKER_CYLINDER, MARKER_ARROW = 3, 0         # visualization_msgs/Marker types
+MARKER_ADD, MARKER_DELETEALL = 0, 3          # and actions
+
+
+def _rgba(slip: SlipEstimate) -> tuple[float, float, float, float]:
+    if slip.state == SLIP_GROSS:
+        return _GROSS_RGBA
+    if slip.state == SLIP_PARTIAL and math.isfinite(slip.margin):
+        m = min(max(slip.margin, 0.0), 1.0)
+        return (0.95, 0.15 + 0.75 * m, 0.1, 0.55)
+    if slip.state == SLIP_STICK and math.isfinite(slip.margin):
+        return _STICK_RGBA
+    return _UNKNOWN_RGBA
+
+
+def slip_markers(slip: SlipEstimate) -> list[dict[str, Any]]:
+    """RViz markers of the slip state (visualization_msgs/Marker fields, pad frame, z = 0).
+
+    The contact disc (radius a) coloured by state: green stick, yellow to red partial slip
+    as the margin falls, red gross slip, grey when not measured; the stick disc (radius c)
+    above it in green; an arrow of length a along the slip direction.  No contact: one
+    DELETEALL marker, so nothing stale stays on screen.
+    """
+    if slip.state == SLIP_NO_CONTACT or not math.isfinite(slip.contact_radius):
+        return [{"id": 0, "type": MARKER_CYLINDER, "action": MARKER_DELETEALL}]
+    cx, cy, _ = slip.centroid
+    a = float(slip.contact_radius)
+    flat = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+    out = [{"id": 0, "type": MARKER_CYLINDER, "action": MARKER_ADD,
+            "position": {"x": cx, "y": cy, "z": 0.0}, "orientation": flat,
+            "scale": {"x": 2 * a, "y": 2 * a, "z": 1e-4}, "color": _rgba(slip)}]
+    c = float(slip.stick_radius)
+    if math.isfinite(c) and c > 0:
+        out.append({"id": 1, "type": MARKER_CYLINDER, "action": MARKER_ADD,
+                    "position": {"x": cx, "y": cy, "z": 1e-4}, "orientation": flat,
+                    "scale": {"x": 2 * c, "y": 2 * c, "z": 1e-4},
+                    "color": (0.1, 0.6, 0.2, 0.9)})
+    dx, dy, _ = slip.direction
+    if dx or dy:
+        yaw = math.atan2(dy, dx)
+        out.append({"id": 2, "type": MARKER_ARROW, "action": MARKER_ADD,
+                    "position": {"x": cx, "y": cy, "z": 2e-4},
+                    "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2),
+                                    "w": math.cos(yaw / 2)},
+                    "scale": {"x": a, "y": 3e-4, "z": 5e-4}, "color": _rgba(slip)[:3] + (1.0,)})
+    return out
+
+
 def depth_fields(depth: np.ndarray, stamp: Stamp, frame_id: str) -> dict[str, Any]:
     """sensor_msgs/Image 32FC1 (little endian) of the depth map."""
     data = np.ascontiguousarray(depth, dtype="<f4")
@@ -76,6 +147,7 @@ TOUCH_TOPICS = {
     "wrench": "geometry_msgs/msg/WrenchStamped",
     "contact": "tactile_sl_msgs/msg/Contact",
     "depth": "sensor_msgs/msg/Image",
+    "slip": "tactile_sl_msgs/msg/Slip",
 }
 
 
@@ -86,4 +158,5 @@ def touch_messages(result: TouchResult, stamp: Stamp, frame_id: str
             ("wrench", TOUCH_TOPICS["wrench"], wrench_fields(result, stamp, frame_id)),
             ("contact", TOUCH_TOPICS["contact"], contact_fields(result.contact, stamp,
                                                                 frame_id)),
-            ("depth", TOUCH_TOPICS["depth"], depth_fields(result.depth, stamp, frame_id))]
+            ("depth", TOUCH_TOPICS["depth"], depth_fields(result.depth, stamp, frame_id)),
+            ("slip", TOUCH_TOPICS["slip"], slip_fields(result.slip, stamp, frame_id))]

@@ -1,7 +1,7 @@
 """The touch stage: one frame's decoded points in; displacement, forces, contact out.
 
-It also gives the wrench and the depth map; no rclpy, used by the decoder node and
-``tactile-sl replay`` alike, so both give the same bytes.
+It also gives the wrench, the depth map and the slip estimate (:mod:`.slip`); no rclpy,
+used by the decoder node and ``tactile-sl replay`` alike, so both give the same bytes.
 
 Life cycle: the first ``reference_frames`` frames that decode build the reference (the pad
 must be untouched); :meth:`TouchStage.tare` starts a new one, refused while the pad is
@@ -43,6 +43,7 @@ from tactile_sl_decoder.touch.reference import (
     nominal_positions,
 )
 from tactile_sl_decoder.touch.sensor import SensorConfig
+from tactile_sl_decoder.touch.slip import SlipEstimate, SlipEstimator, SlipParams
 from tactile_sl_decoder.touch.traction import TractionParams, TractionSolver
 
 
@@ -53,6 +54,7 @@ class TouchParams:
     reference_frames: int = 1
     traction: TractionParams = field(default_factory=TractionParams)
     contact: ContactParams = field(default_factory=ContactParams)
+    slip: SlipParams = field(default_factory=SlipParams)
     tare_max_depth: float = 5e-5   # m: a tare is refused above this indentation ...
                                    # ... or while in_contact
     max_pending_frames: int = 300  # frames kept while a reference is prepared in the
@@ -70,6 +72,7 @@ class TouchParams:
                              f"{self.max_pending_frames}")
         self.traction.validate()
         self.contact.validate()
+        self.slip.validate()
         return self
 
 
@@ -98,6 +101,7 @@ class TouchResult:
     contact: ContactState
     depth: np.ndarray          # (H, W) float32 m of indentation, NaN where not decoded
     timings_ms: dict[str, float] = field(default_factory=dict)
+    slip: SlipEstimate = field(default_factory=SlipEstimate)   # of the contact pressing hardest
 
 
 class _Preparation:
@@ -142,6 +146,8 @@ class TouchStage:
         self.depth_grid = depth_grid(self.shape, self.pitch, self.params.contact.depth_upsample,
                                      self.mirrored)
         self._depth = DepthMapper(self.shape, self.params.contact.depth_upsample, self.mirrored)
+        # response tables of the elastomer: built once per pad (cached), ~10-50 ms
+        self.slip = SlipEstimator(sensor.elastomer, self.pitch, self.params.slip)
         self.reference: Reference | None = None
         self.solver: TractionSolver | None = None
         self.contact_params = self.params.contact
@@ -353,9 +359,14 @@ class TouchStage:
         force = np.zeros((len(rows), 3))
         force[known] = forces_ref[k[known]]
         t3 = time.perf_counter()
+        slip = self.slip.estimate(self._rest_table[flat, :2], displacement, -force[:, 2],
+                                  contact, self.contact_params.area_fraction,
+                                  np.column_stack([cols, rows]))
+        t4 = time.perf_counter()
         result = TouchResult(rows, cols, position, displacement, force, wrench_force,
                              wrench_moment, contact, depth,
                              {"displacement": 1e3 * (t1 - t0), "traction": 1e3 * (t2 - t1),
-                              "contact": 1e3 * (t3 - t2), "touch": 1e3 * (t3 - t0)})
+                              "contact": 1e3 * (t3 - t2), "slip": 1e3 * (t4 - t3),
+                              "touch": 1e3 * (t4 - t0)}, slip)
         self._last = result
         return result
