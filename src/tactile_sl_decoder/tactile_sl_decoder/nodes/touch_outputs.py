@@ -202,8 +202,12 @@ class TouchOutputs:
         response.success, response.message = ok, text
         self.tares += int(ok)
         self.last_tare = f"{'accepted' if ok else 'refused'}: {text}"
-        log = self.node.get_logger()
-        (log.info if ok else log.warning)(f"tare {text}")
+        # one call site per severity: rclpy refuses a severity change at the same call site
+        # (a ValueError in this callback, which ended the node without a reply)
+        if ok:
+            self.node.get_logger().info(f"tare {text}")
+        else:
+            self.node.get_logger().warning(f"tare {text}")
         self.announced_waiting = False
         return response
 

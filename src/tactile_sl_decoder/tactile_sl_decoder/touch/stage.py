@@ -144,7 +144,7 @@ class TouchStage:
         self._depth = DepthMapper(self.shape, self.params.contact.depth_upsample, self.mirrored)
         self.reference: Reference | None = None
         self.solver: TractionSolver | None = None
-        self.contact_params = self.params.contact
+        self._area_fraction = 0.0        # the solver's choice, set with each reference
         self._builder = ReferenceBuilder(self.params.reference_frames, self.shape)
         self.background = bool(background)
         self._preparing: _Preparation | None = None
@@ -261,8 +261,7 @@ class TouchStage:
     def _set_reference(self, prepared: tuple[Any, ...]) -> None:
         cells, rest, pose, frames, nominal, solver = prepared
         self.solver = solver
-        fraction = self.params.contact.area_fraction or self.solver.area_fraction
-        self.contact_params = dataclasses.replace(self.params.contact, area_fraction=fraction)
+        self._area_fraction = solver.area_fraction
         self._index[:] = -1
         self._index[cells] = np.arange(len(cells))
         self._rest_table = nominal_positions(*np.divmod(np.arange(len(self._index)),
@@ -270,6 +269,18 @@ class TouchStage:
                                              self.shape, self.pitch, self.mirrored)
         self._rest_table[cells] = rest
         self.reference = Reference(cells, rest, pose, frames, nominal)
+
+    @property
+    def contact_params(self) -> ContactParams:
+        """The contact thresholds in force: ``params.contact`` as it is now.
+
+        A live change applies from the next frame; the area fraction is the reference's
+        solver's unless ``params.contact`` sets one.
+        """
+        contact = self.params.contact
+        if contact.area_fraction or not self._area_fraction:
+            return contact
+        return dataclasses.replace(contact, area_fraction=self._area_fraction)
 
     # ------------------------------------------------------------------ frames
 
