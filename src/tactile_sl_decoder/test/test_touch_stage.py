@@ -79,6 +79,11 @@ def test_bad_settings_are_refused():
         TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=0))
     with pytest.raises(ValueError, match="pitch"):
         TouchStage(sensor, SHAPE, 0.0)
+    # issue 28, item 3: a layer the kernel cannot resolve is refused at load (it used to fail
+    # with a LinAlgError when the first reference was prepared)
+    thin = SensorConfig(Elastomer(3e5, 0.49, 1e-5), source="thin.yaml")
+    with pytest.raises(ValueError, match="thin.yaml: .*quarter of the cell pitch"):
+        TouchStage(thin, SHAPE, PITCH)
 
 
 @pytest.mark.parametrize("thickness", [0.0, 0.002])

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_sl_camera.elasticity import check_layer_resolved
 from tactile_sl_decoder.touch.contact import (
     ContactParams,
     ContactState,
@@ -134,6 +135,10 @@ class TouchStage:
                  background: bool = False) -> None:
         if pitch <= 0:
             raise ValueError(f"the pattern's pitch must be > 0 for touch outputs, got {pitch}")
+        try:    # at load, not when the first reference is prepared
+            check_layer_resolved(sensor.elastomer, pitch)
+        except ValueError as exc:
+            raise ValueError(f"{sensor.source}: {exc}") from None
         self.sensor = sensor
         self.shape = (int(shape[0]), int(shape[1]))
         self.pitch = float(pitch)
