@@ -8,7 +8,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from test_safe_outputs import run_cli, small_bag
+import pytest
+from test_safe_outputs import IMAGE_TOPICS, SOURCE_BAG, run_cli, small_bag
+
+from tactile_sl_decoder.cli import main
 
 
 def _sensor(path: Path, thickness: float) -> Path:
@@ -26,3 +29,64 @@ def test_replay_with_a_layer_too_thin_to_model_is_one_line(tmp_path, capsys):
                       "--no-progress")
     assert rc == 1 and "thin.yaml" in err and "quarter of the cell pitch" in err, err
     assert not (tmp_path / "out.mcap").exists()
+
+
+def _bag_with_bad_images(path: Path, kind: str, bad_frames: set[int]) -> Path:
+    """The first two frames of a shipped bag (with ground truth); ``bad_frames`` get images
+    of another ``kind``: 320x240 against the 640x480 CameraInfo, mono16 or yuv422."""
+    import cv2
+    import numpy as np
+
+    from tactile_sl_camera.bag_io import BagReader, BagWriter
+    from tactile_sl_camera.images import image_to_array
+
+    topics = IMAGE_TOPICS + ["/tactile/ground_truth/points"]
+    stamps: list[int] = []
+    with BagWriter(path) as out:
+        for raw, msg in BagReader(SOURCE_BAG).messages(topics):
+            if raw.log_time_ns not in stamps:
+                if len(stamps) == 2:
+                    break
+                stamps.append(raw.log_time_ns)
+            if not raw.topic.endswith("image_raw") or len(stamps) - 1 not in bad_frames:
+                out.write_raw(raw.topic, raw.schema_name, raw.data, raw.log_time_ns)
+                continue
+            pixels = image_to_array(msg)
+            header = {"stamp": {"sec": msg.header.stamp.sec,
+                                "nanosec": msg.header.stamp.nanosec},
+                      "frame_id": msg.header.frame_id}
+            if kind == "320x240":
+                small = cv2.resize(pixels, (320, 240))
+                fields = {"height": 240, "width": 320, "encoding": "mono8", "step": 320,
+                          "data": small.tobytes()}
+            else:
+                data = ((pixels.astype("<u2") << 8).tobytes() if kind == "mono16"
+                        else np.repeat(pixels, 2).tobytes())
+                fields = {"height": msg.height, "width": msg.width, "encoding": kind,
+                          "step": 2 * msg.width, "data": data}
+            out.write(raw.topic, raw.schema_name,
+                      {"header": header, "is_bigendian": 0, **fields}, raw.log_time_ns)
+    return path
+
+
+@pytest.mark.parametrize("kind, why", [
+    ("320x240", "left image is 320x240 but its CameraInfo says 640x480"),
+    ("mono16", "unsupported image encoding 'mono16'"),
+    ("yuv422", "unsupported image encoding 'yuv422'")])
+def test_evaluate_skips_unusable_frames_and_fails_when_nothing_is_left(tmp_path, capsys,
+                                                                         kind, why):
+    """Item 5: PipelineInputError / ImageFormatError tracebacks (exit 0 after them)."""
+    bag = _bag_with_bad_images(tmp_path / f"{kind}.mcap", kind, {0, 1})
+    rc, err = run_cli(capsys, "evaluate", bag, "--totals-only")
+    assert rc == 1 and err.count(why) == 2 and "nothing was evaluated" in err, err
+
+
+def test_evaluate_reports_the_frames_it_could_use(tmp_path, capsys):
+    bag = _bag_with_bad_images(tmp_path / "mixed.mcap", "mono16", {1})
+    try:
+        rc = main(["evaluate", str(bag), "--totals-only"])
+    finally:
+        out, err = capsys.readouterr()
+    assert rc == 0 and "Traceback" not in err
+    assert err.count("skipped: unsupported image encoding 'mono16'") == 1
+    assert "1 frame(s) skipped" in err and "mixed" in out
