@@ -4,6 +4,7 @@ Views are rendered by the simulator (flat artwork at known poses, 30 % hidden, b
 noise) with supersampling off to keep the suite fast; the true calibration is the rig's.
 """
 import argparse
+import os
 import pathlib
 
 import cv2
@@ -266,3 +267,32 @@ def test_refine_cli_repairs_a_knocked_camera(untouched_bag, renderer, tmp_path, 
     assert _cli("--refine", untouched_bag, "--calibration", tmp_path, "--target", "-o", out) == 0
     assert _cli("--check", untouched_bag, "--calibration", out, "--target") == 0
     assert "verdict: PASS" in capsys.readouterr().out
+
+
+# --------------------------------------------------------------------------- outputs (issue 28)
+
+
+@pytest.mark.parametrize("blocked, mode", [("right.yaml", "target"), ("coverage.png", "target"),
+                                           ("right.yaml", "board")])
+def test_outputs_are_written_all_or_none(view_dir, tmp_path, capsys, blocked, mode):
+    """Item 6: with right.yaml (or coverage.png) a folder, left.yaml (and right.yaml) were
+    written although the command failed; now it refuses before any work."""
+    out = tmp_path / "out"
+    (out / blocked).mkdir(parents=True)
+    args = ["--target"] if mode == "target" else ["--pattern", "9x6"]
+    assert _cli("--folder", view_dir, *args, "-o", out) == 1
+    err = capsys.readouterr().err
+    assert f"{out / blocked}: it exists and is not a regular file" in err, err
+    assert sorted(p.name for p in out.iterdir()) == [blocked]
+
+
+def test_outputs_are_readable_by_everyone_under_umask_022(view_dir, tmp_path):
+    """Item 6: every output was created 0600 (its temporary file's mode)."""
+    umask = os.umask(0o022)
+    try:
+        assert _cli("--folder", view_dir, "--target", "-o", tmp_path / "out") == 0
+    finally:
+        os.umask(umask)
+    modes = {p.name: p.stat().st_mode & 0o777 for p in (tmp_path / "out").iterdir()}
+    assert modes == {"left.yaml": 0o644, "right.yaml": 0o644, "coverage.png": 0o644}
+

@@ -26,6 +26,8 @@ if TYPE_CHECKING:  # the modes import numpy themselves, so that --help stays fas
     import numpy as np
 
 PROG = "tactile-sl calibrate"
+CAMERA_FILES = ["left.yaml", "right.yaml"]
+"""What every calibrating mode writes into -o (written all or none, see safe_files)."""
 
 
 def _pattern(text: str) -> tuple[int, int]:
@@ -173,8 +175,11 @@ def _target(args: argparse.Namespace) -> Any:
 
 
 def _run_board(args: argparse.Namespace) -> int:
-    """Checkerboard calibration (the original path, unchanged)."""
+    """Checkerboard calibration (the original path)."""
     from tactile_sl_camera.calibration import calibrate_stereo
+    from tactile_sl_camera.safe_files import check_outputs
+
+    check_outputs(args.output, CAMERA_FILES)       # before any work
 
     def on_pair(i: int, ok: bool) -> None:
         print(f"\rpair {i + 1}: {'board found' if ok else 'no board'}   ", end="",
@@ -192,12 +197,14 @@ def _run_board(args: argparse.Namespace) -> int:
 def _run_target(args: argparse.Namespace) -> int:
     """Printed-pattern calibration: decode every view, calibrate, report, write."""
     from tactile_sl_camera.calibration import CalibrationError
+    from tactile_sl_camera.safe_files import check_outputs
     from tactile_sl_decoder.calibrate import (
         CalibrationOptions,
         ViewDecoder,
         calibrate_pattern_stereo,
     )
 
+    check_outputs(args.output, CAMERA_FILES + ([] if args.no_coverage else ["coverage.png"]))
     target = _target(args)
     decoder = ViewDecoder(target)
     views, first = [], None
@@ -347,10 +354,11 @@ def _run_check(args: argparse.Namespace) -> int:
 def _run_refine(args: argparse.Namespace) -> int:
     """Refine the extrinsics in place; write the refined calibration atomically."""
     from tactile_sl_camera.camera_info import camera_info_yaml_text
-    from tactile_sl_decoder.calibrate import write_atomically
+    from tactile_sl_camera.safe_files import check_outputs, write_files
     from tactile_sl_decoder.calibrate.health import calibration_health, refine_extrinsics
     from tactile_sl_decoder.stereo.stereo import StereoRig
 
+    check_outputs(args.output, CAMERA_FILES)       # before any work
     views, left, right = _untouched(args, args.refine)
     target = _target(args)
     before = calibration_health([v.left for v in views], [v.right for v in views],
@@ -361,7 +369,7 @@ def _run_refine(args: argparse.Namespace) -> int:
     print(f"before:\n{before.summary()}\nafter refining the extrinsics (RMS "
           f"{result.rms_stereo:.3f} px, baseline {result.baseline * 1e3:.4f} mm):\n"
           f"{after.summary()}")
-    written = write_atomically(args.output, {
+    written = write_files(args.output, {
         "left.yaml": camera_info_yaml_text(result.left).encode(),
         "right.yaml": camera_info_yaml_text(result.right).encode()})
     print("wrote " + ", ".join(str(p) for p in written))
@@ -371,7 +379,7 @@ def _run_refine(args: argparse.Namespace) -> int:
 def _run_force(args: argparse.Namespace) -> int:
     """Fit the elastomer to a recording with known loads; write OUT/sensor.yaml."""
     from tactile_sl_camera.images import to_gray
-    from tactile_sl_decoder.calibrate import write_atomically
+    from tactile_sl_camera.safe_files import check_outputs, write_files
     from tactile_sl_decoder.frames import bag_frames
     from tactile_sl_decoder.glyphs import PipelineInputError
     from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
@@ -380,6 +388,7 @@ def _run_force(args: argparse.Namespace) -> int:
 
     if not args.bag:
         raise ValueError("--loads needs the recording: --bag BAG")
+    check_outputs(args.output, ["sensor.yaml"])      # before any work
     loads = load_loads_file(args.loads)
     start = load_sensor(args.sensor)
     pattern = PatternSpec.load(args.target or None)
@@ -415,7 +424,7 @@ def _run_force(args: argparse.Namespace) -> int:
     print(fit.report())
     comment = (f"written by tactile-sl calibrate --loads {args.loads} --bag {args.bag}\n"
                f"RMS force error {fit.rms_error * 100:.2f} % over {len(fit.loads)} loads")
-    written = write_atomically(args.output, {
+    written = write_files(args.output, {
         "sensor.yaml": sensor_yaml_text(fit.sensor, comment).encode()})
     print(f"wrote {written[0]}")
     return 0
