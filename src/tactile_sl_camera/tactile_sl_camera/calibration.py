@@ -149,12 +149,29 @@ def _read(path: pathlib.Path) -> np.ndarray:
     return image
 
 
-def folder_pairs(folder: str | os.PathLike) -> list[tuple[pathlib.Path, pathlib.Path]]:
-    """Image pairs in a folder: every file with 'left' in its name and its 'right' twin."""
+def _folder_images(folder: str | os.PathLike) -> dict[str, pathlib.Path]:
     d = pathlib.Path(folder)
     if not d.is_dir():
         raise CalibrationError(f"{d}: not a folder")
-    files = {p.name: p for p in d.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES}
+    return {p.name: p for p in d.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES}
+
+
+def unpaired_images(folder: str | os.PathLike) -> list[pathlib.Path]:
+    """Images named for one camera ('left' or 'right') whose twin is missing: not used."""
+    files = _folder_images(folder)
+    return [files[name] for name in sorted(files)
+            if ("left" in name and name.replace("left", "right") not in files)
+            or ("right" in name and "left" not in name
+                and name.replace("right", "left") not in files)]
+
+
+def folder_pairs(folder: str | os.PathLike) -> list[tuple[pathlib.Path, pathlib.Path]]:
+    """Image pairs in a folder: every file with 'left' in its name and its 'right' twin.
+
+    Images without a twin are left out; :func:`unpaired_images` names them.
+    """
+    d = pathlib.Path(folder)
+    files = _folder_images(d)
     pairs = []
     for name in sorted(files):
         if "left" in name:

@@ -296,3 +296,16 @@ def test_outputs_are_readable_by_everyone_under_umask_022(view_dir, tmp_path):
     modes = {p.name: p.stat().st_mode & 0o777 for p in (tmp_path / "out").iterdir()}
     assert modes == {"left.yaml": 0o644, "right.yaml": 0o644, "coverage.png": 0o644}
 
+
+def test_unpaired_images_are_named(view_dir, tmp_path, capsys):
+    """Item 9: 6 left and 4 right images said 'pairs used 4/4' and nothing of the other two."""
+    folder = tmp_path / "v"
+    folder.mkdir()
+    for i in range(6):
+        for side in ("left", "right"):
+            if side == "left" or i < 4:
+                name = f"{side}_{i:03d}.png"
+                (folder / name).write_bytes((view_dir / name).read_bytes())
+    assert _cli("--folder", folder, "--target", "-o", tmp_path / "out") == 0
+    err = capsys.readouterr().err
+    assert "2 image(s) without a partner, not used: left_004.png, left_005.png" in err, err

@@ -154,9 +154,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _pairs(args: argparse.Namespace) -> Any:
-    from tactile_sl_camera.calibration import iter_bag_pairs, iter_folder_pairs
+    from tactile_sl_camera.calibration import iter_bag_pairs, iter_folder_pairs, unpaired_images
 
     if args.folder:
+        alone = unpaired_images(args.folder)
+        if alone:       # "pairs used 4/4" alone would hide them
+            print(f"{PROG}: {len(alone)} image(s) without a partner, not used: "
+                  f"{', '.join(p.name for p in alone)}", file=sys.stderr)
         return iter_folder_pairs(args.folder)
     return iter_bag_pairs(args.bag, args.left_topic, args.right_topic, args.every)
 
