@@ -309,3 +309,28 @@ def test_unpaired_images_are_named(view_dir, tmp_path, capsys):
     assert _cli("--folder", folder, "--target", "-o", tmp_path / "out") == 0
     err = capsys.readouterr().err
     assert "2 image(s) without a partner, not used: left_004.png, left_005.png" in err, err
+
+
+def test_check_and_refine_take_the_calibration_files_for_a_bag_without_camera_info(
+        untouched_bag, renderer, tmp_path, capsys):
+    """Item 10: --check / --refine demanded the bag's camera_info topics although
+    --calibration DIR (or --left-info / --right-info) gave the calibration."""
+    from tactile_sl_camera.bag_io import BagReader, BagWriter
+
+    bag = tmp_path / "images_only.mcap"
+    with BagWriter(bag) as out:
+        for raw in BagReader(untouched_bag).raw_messages():
+            if raw.topic.endswith("image_raw"):
+                out.write_raw(raw.topic, raw.schema_name, raw.data, raw.log_time_ns)
+    save_camera_info_yaml(tmp_path / "left.yaml", renderer.rig.left_info)
+    save_camera_info_yaml(tmp_path / "right.yaml", renderer.rig.right_info)
+    assert _cli("--check", bag, "--calibration", tmp_path, "--target") == 0
+    assert _cli("--check", bag, "--left-info", tmp_path / "left.yaml", "--right-info",
+                tmp_path / "right.yaml", "--target") == 0
+    assert "verdict: PASS" in capsys.readouterr().out
+    assert _cli("--refine", bag, "--calibration", tmp_path, "--target",
+                "-o", tmp_path / "refined") == 0
+    assert (tmp_path / "refined" / "right.yaml").is_file()
+    assert _cli("--check", bag, "--target") == 1          # no calibration anywhere
+    err = capsys.readouterr().err
+    assert "camera_info" in err, err

@@ -315,10 +315,17 @@ def _untouched(args: argparse.Namespace, bag: str) -> tuple[list[Any], Any, Any]
 
     if args.frames < 1:
         raise ValueError("--frames must be at least 1")
+    folder = pathlib.Path(args.calibration) if args.calibration else None
+    left_path = args.left_info or (folder / "left.yaml" if folder else None)
+    right_path = args.right_info or (folder / "right.yaml" if folder else None)
+    if (left_path is None) != (right_path is None):
+        raise ValueError("give both --left-info and --right-info (or --calibration DIR)")
+    files = left_path is not None and right_path is not None
     decoder = ViewDecoder(_target(args))
     views, infos = [], None
     try:
-        for frame in bag_frames(bag, ground_truth=False):
+        # the bag's camera_info topics are needed only without calibration files
+        for frame in bag_frames(bag, ground_truth=False, camera_info=not files):
             views.append(decoder.decode(to_gray(frame.left_image), to_gray(frame.right_image),
                                         f"{frame.stamp[0]}.{frame.stamp[1]:09d}"))
             if infos is None and frame.left_info is not None and frame.right_info is not None:
@@ -329,13 +336,8 @@ def _untouched(args: argparse.Namespace, bag: str) -> tuple[list[Any], Any, Any]
         decoder.close()
     if not views:
         raise ValueError(f"{bag}: no stereo frames")
-    folder = pathlib.Path(args.calibration) if args.calibration else None
-    left_path = args.left_info or (folder / "left.yaml" if folder else None)
-    right_path = args.right_info or (folder / "right.yaml" if folder else None)
     if left_path is not None and right_path is not None:
         return views, load_camera_info_yaml(left_path), load_camera_info_yaml(right_path)
-    if left_path is not None or right_path is not None:
-        raise ValueError("give both --left-info and --right-info (or --calibration DIR)")
     if infos is None:
         raise ValueError(f"{bag}: no CameraInfo recorded; pass --calibration DIR")
     return (views, calibration_from_msg(infos[0], "left CameraInfo"),
