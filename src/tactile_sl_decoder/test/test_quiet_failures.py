@@ -31,9 +31,9 @@ def test_replay_with_a_layer_too_thin_to_model_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "out.mcap").exists()
 
 
-def _bag_with_bad_images(path: Path, kind: str, bad_frames: set[int]) -> Path:
-    """The first two frames of a shipped bag (with ground truth); ``bad_frames`` get images
-    of another ``kind``: 320x240 against the 640x480 CameraInfo, mono16 or yuv422."""
+def _bag_with_bad_images(path: Path, kind: str, bad_frames: set[int], frames: int = 2) -> Path:
+    """The first ``frames`` frames of a shipped bag (with ground truth); ``bad_frames`` get
+    images of another ``kind``: 320x240 against the 640x480 CameraInfo, mono16 or yuv422."""
     import cv2
     import numpy as np
 
@@ -45,7 +45,7 @@ def _bag_with_bad_images(path: Path, kind: str, bad_frames: set[int]) -> Path:
     with BagWriter(path) as out:
         for raw, msg in BagReader(SOURCE_BAG).messages(topics):
             if raw.log_time_ns not in stamps:
-                if len(stamps) == 2:
+                if len(stamps) == frames:
                     break
                 stamps.append(raw.log_time_ns)
             if not raw.topic.endswith("image_raw") or len(stamps) - 1 not in bad_frames:
@@ -90,3 +90,30 @@ def test_evaluate_reports_the_frames_it_could_use(tmp_path, capsys):
     assert rc == 0 and "Traceback" not in err
     assert err.count("skipped: unsupported image encoding 'mono16'") == 1
     assert "1 frame(s) skipped" in err and "mixed" in out
+
+
+def test_replay_that_writes_no_cloud_fails(tmp_path, capsys):
+    """Item 11: every frame skipped (an encoding it cannot read) said '0 clouds written',
+    exit 0, and left an empty bag."""
+    bag = _bag_with_bad_images(tmp_path / "mono16.mcap", "mono16", {0, 1})
+    out = tmp_path / "out.mcap"
+    rc, err = run_cli(capsys, "replay", bag, "-o", out, "--no-progress")
+    assert rc == 1 and "no point cloud from any of the 2 stereo frame(s)" in err, err
+    assert "2 skipped" in err and not out.exists()
+
+
+def test_replay_whose_reference_takes_every_frame_fails(tmp_path, capsys):
+    """Item 11: --reference-frames 99 on a short bag said 'touch outputs for 0 frames', exit
+    0; refused before any work now, and a reference that no frame follows fails the run."""
+    bag = small_bag(tmp_path / "in.mcap", frames=2)
+    out = tmp_path / "out.mcap"
+    rc, err = run_cli(capsys, "replay", bag, "-o", out, "--reference-frames", "99",
+                      "--no-progress")
+    assert rc == 1 and "has 2 stereo frame(s)" in err and not out.exists(), err
+    gap = _bag_with_bad_images(tmp_path / "gap.mcap", "mono16", {2}, frames=3)
+    rc, err = run_cli(capsys, "replay", gap, "-o", out, "--reference-frames", "2",
+                      "--no-progress")
+    assert rc == 1 and "no touch output" in err and not out.exists(), err
+    rc, err = run_cli(capsys, "replay", gap, "-o", out, "--reference-frames", "2",
+                      "--no-touch", "--no-progress")
+    assert rc == 0 and out.exists()
