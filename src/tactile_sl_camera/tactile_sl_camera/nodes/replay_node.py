@@ -134,6 +134,7 @@ class ReplayNode(Node):
                                      declare_qos(live, "pace", "the wait_for_topic "
                                                  "subscription", 10))
         self.done = threading.Event()
+        self.failure: BagError | None = None    # why playing stopped early (exit status 1)
         self._done_at: float | None = None
         self._stopping = threading.Event()
         self.published = 0
@@ -149,7 +150,14 @@ class ReplayNode(Node):
         return rclpy.ok() and not self._stopping.is_set() and not stop.requested()
 
     def finished(self) -> bool:
-        """The bag has been played (exit_on_end), and 0.3 s passed for the last delivery."""
+        """The bag has been played (exit_on_end), and 0.3 s passed for the last delivery.
+
+        Raises the BagError that stopped the playing thread (a chunk failing its CRC, a
+        message that cannot be read), so that the node ends with one FATAL line and exit
+        status 1 instead of looking like a bag played to its end.
+        """
+        if self.failure is not None:
+            raise self.failure
         if not (self.exit_on_end and self.done.is_set()):
             return False
         if self._done_at is None:
@@ -206,7 +214,7 @@ class ReplayNode(Node):
                     break
             self.get_logger().info(f"finished: {self.published} messages published")
         except BagError as exc:
-            self.get_logger().error(str(exc))
+            self.failure = exc         # raised by finished(): FATAL, exit status 1
         finally:
             self.done.set()
 
