@@ -125,3 +125,23 @@ def test_tare_answers_both_ways_and_contact_thresholds_apply_live(tmp_path):
         assert check.violations == [], check.violations
         assert light, "no 0.5 N frame was out of contact under on 1 N / off 0.3 N"
         assert decoder.process.poll() is None, decoder.log()
+
+
+def test_a_pressed_reference_is_a_warning(ros, domain_id, tmp_path):
+    """Item 8: a reference taken while 2 N pressed (190 um RMS fit residual) was one INFO
+    line; the wrench then read the load with nothing pressing.  Now a WARN line (and the
+    diagnostics' touch status says WARN, docs/diagnostics.md)."""
+    from tactile_sl_decoder.tooling.touch_soak import write_phase_bag
+
+    bag = tmp_path / "pressed_first.mcap"
+    write_phase_bag(BAGS / "touch_halfspace.mcap", bag, untouched=[3], pressed=[0],
+                    untouched_frames=2, pressed_frames=1)
+    decoder = ros.start()
+    with running_node("tactile_sl_camera", "replay", domain_id,
+                      ["-r", "__ns:=/tactile", "-p", f"bag:={bag}",
+                       "-p", "wait_for_subscribers:=1", "-p", "rate:=0.5"],
+                      tmp_path / "replay.log"):
+        assert decoder.wait_for_log("fit residual", 60.0, lambda: ros.spin(0.05)), \
+            decoder.log()
+    line = next(li for li in decoder.lines() if "fit residual" in li)
+    assert line.startswith("[WARN]") and "touched when the reference was taken" in line, line

@@ -117,3 +117,24 @@ def test_replay_whose_reference_takes_every_frame_fails(tmp_path, capsys):
     rc, err = run_cli(capsys, "replay", gap, "-o", out, "--reference-frames", "2",
                       "--no-touch", "--no-progress")
     assert rc == 0 and out.exists()
+
+
+def test_replay_warns_when_the_reference_was_pressed(tmp_path, capsys):
+    """Item 8: a reference taken while 2 N pressed (190 um RMS fit residual) was accepted
+    quietly, and every later wrench was off by the load."""
+    from tactile_sl_decoder.tooling.touch_soak import write_phase_bag
+
+    from ros_harness import BAGS
+
+    bag = tmp_path / "pressed_first.mcap"
+    write_phase_bag(BAGS / "touch_halfspace.mcap", bag, untouched=[3], pressed=[0],
+                    untouched_frames=1, pressed_frames=1)
+    rc, err = run_cli(capsys, "replay", bag, "-o", tmp_path / "out.mcap", "--no-progress")
+    assert rc == 0 and "WARNING: reference at frame" in err, err
+    assert "touched when the reference was taken" in err
+    untouched = tmp_path / "untouched_first.mcap"
+    write_phase_bag(BAGS / "touch_halfspace.mcap", untouched, untouched=[0], pressed=[3],
+                    untouched_frames=1, pressed_frames=1)
+    rc, err = run_cli(capsys, "replay", untouched, "-o", tmp_path / "out2.mcap",
+                      "--no-progress")
+    assert rc == 0 and "WARNING" not in err, err

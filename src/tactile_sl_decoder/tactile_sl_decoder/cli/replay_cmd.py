@@ -194,7 +194,7 @@ def _write_touch(writer: Any, touch: Any, result: Any, frame: Any, prefix: str) 
     if touch is None:
         return 0
     from tactile_sl_decoder.touch.messages import pose_fields, touch_messages
-    from tactile_sl_decoder.touch.reference import ReferenceError
+    from tactile_sl_decoder.touch.reference import ReferenceError, residual_warning
 
     had_reference = touch.ready
     try:
@@ -209,6 +209,10 @@ def _write_touch(writer: Any, touch: Any, result: Any, frame: Any, prefix: str) 
             pose = pose_fields(touch.reference.pose, frame.stamp, result.frame_id)
             writer.write(f"{prefix}/pad_pose", "geometry_msgs/msg/PoseStamped", pose,
                          frame.stamp_ns)
+            warning = residual_warning(touch.reference.pose.residual_rms)
+            if warning is not None:
+                print(f"tactile-sl replay: WARNING: reference at frame {frame.stamp[0]}."
+                      f"{frame.stamp[1]:09d}: {warning}", file=sys.stderr)
         return 0
     for name, schema, fields in touch_messages(outputs, frame.stamp, touch.sensor.pad_frame):
         writer.write(f"{prefix}/{name}", schema, fields, frame.stamp_ns)
