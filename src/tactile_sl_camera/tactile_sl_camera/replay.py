@@ -23,6 +23,9 @@ from tactile_sl_camera.bag_io import (
 IMAGE_TYPE = "sensor_msgs/msg/Image"
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 DEFAULT_TYPES = (IMAGE_TYPE, CAMERA_INFO_TYPE)
+ONE_FRAME_LOOP_PERIOD_NS = 100_000_000
+"""A bag of one stereo frame has no recorded rate: looped, it plays at 10 Hz x ``rate``
+(the bundled bags' rate) rather than publishing as fast as the thread can spin."""
 HEADER_FIRST_TYPES = {IMAGE_TYPE, CAMERA_INFO_TYPE, "sensor_msgs/msg/PointCloud2",
                       "sensor_msgs/msg/CompressedImage", "tactile_sl_msgs/msg/SymbolArray"}
 
@@ -125,7 +128,8 @@ class ReplayPlan:
             frames = sorted(set(stamps))
             steps = [b - a for a, b in zip(frames, frames[1:])]
             self.span_ns = last_ns - start_ns
-            self.frame_period_ns = int(statistics.median(steps)) if steps else 0
+            self.frame_period_ns = (int(statistics.median(steps)) if steps
+                                    else ONE_FRAME_LOOP_PERIOD_NS)
 
     def next_pass_start(self, pass_start: float, last_published: float) -> float:
         """When (clock of ``pass_start``, seconds) the next pass of a loop starts.

@@ -84,3 +84,15 @@ def test_a_loop_starts_the_next_pass_one_frame_period_after_the_last(bag):
     fast = ReplayPlan(bag, rate=0)
     list(fast.items())
     assert fast.next_pass_start(10.0, 10.01) == 10.01
+
+
+def test_a_bag_of_one_frame_loops_at_10_hz(tmp_path):
+    path = tmp_path / "one.mcap"
+    with BagWriter(path) as writer:
+        writer.write("/tactile/left/image_raw", "sensor_msgs/msg/Image",
+                     {"header": {"stamp": {"sec": 5, "nanosec": 0}, "frame_id": "left"},
+                      **image_fields(np.zeros((2, 2), np.uint8))}, 5 * 10**9)
+    plan = ReplayPlan(path, rate=2.0)
+    list(plan.items())
+    assert plan.span_ns == 0 and plan.frame_period_ns == 100_000_000
+    assert plan.next_pass_start(10.0, 10.001) == pytest.approx(10.051)   # not a busy loop
