@@ -56,11 +56,16 @@ class TouchSession:
         assert self.probe.spin_until(predicate, timeout), what
 
     def phase_start(self, pressed: bool, timeout: float = 20.0) -> None:
-        """Wait for the first output of the next pressed (or untouched) phase."""
+        """Wait for the first output of the next pressed (or untouched) phase.
+
+        It must be fresh (stamped less than 1 s before it arrived): outputs of frames that
+        waited for a reference arrive late, when the node is already further on.
+        """
         def pressed_now(c) -> bool:
             return c[4] > 1e-4                   # 0.5 N presses in by about 0.2 mm
         seen = len(self.contacts)
         self.wait(lambda: any(pressed_now(a) != pressed and pressed_now(b) == pressed
+                              and b[0] - b[1] < 10**9
                               for a, b in zip(self.contacts[seen - 1 if seen else 0:],
                                               self.contacts[seen:])),
                   timeout, f"no {'pressed' if pressed else 'untouched'} phase began")

@@ -72,6 +72,11 @@ class Seen:
     def pressed(self) -> bool:
         return self.max_depth > PRESSED_DEPTH
 
+    @property
+    def fresh(self) -> bool:
+        """Stamped (published by the replay) less than 1 s before it arrived here."""
+        return self.arrived_ns - self.stamp_ns < 10**9
+
 
 def _rss_mb(pid: int) -> float:
     try:
@@ -175,10 +180,13 @@ class Soak:
     def phase_begins(self, pressed: bool, timeout: float = 12.0) -> bool:
         """Wait for the first output of a pressed (or untouched) phase.
 
-        It must arrive after this call and be made with the latest reference.
+        It must arrive after this call, be made with the latest reference and be fresh
+        (outputs of frames that waited for a reference arrive late, when the node's last
+        frame is already another).
         """
         start = max(len(self.seen), self.reference_index)
         return self.wait(lambda: any(a.pressed != pressed and b.pressed == pressed
+                                     and b.fresh
                                      for a, b in zip(self.seen[max(start - 1, 0):],
                                                      self.seen[start:])), timeout)
 
