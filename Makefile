@@ -50,9 +50,13 @@ bench: setup
 	@$(ENV) python tools/bench_extraction.py --bag bags/sphere_deep_small.mcap
 	@$(ENV) python tools/bench_pipeline.py
 	@$(ENV) python tools/bench_pipeline.py --flip 0.05
+	@$(ENV) python tools/bench_pipeline.py bags/two_contacts.mcap --carry off --repeat 5
 	@$(ENV) python tools/bench_pipeline.py --sequence --carry both
 	@$(ENV) python tools/bench_pipeline.py --ros --rate 30 --seconds 10
 	@$(ENV) python tools/bench_graph.py
+	@$(ENV) python tools/bench_graph.py --rate 6 --seconds 60
+	@$(ENV) python tools/bench_graph.py --sensors 2 --seconds 60
+	@$(ENV) python tools/bench_rclpy.py
 	@$(ENV) python tools/bench_calibration.py
 	@$(ENV) nice -n 10 python tools/bench_sweep.py --bound
 	@$(ENV) python tools/bench_touch.py

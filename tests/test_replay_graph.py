@@ -136,3 +136,22 @@ def test_bad_bag_is_a_clear_error(tmp_path, domain_id, damage, expected):
     assert code != 0
     assert expected in log and str(bag) in log, log
     assert "Traceback" not in log, log
+
+
+def test_a_chunk_failing_its_crc_while_playing_ends_the_node_with_status_1(tmp_path, domain_id):
+    """Issue 28, item 12: the node logged '[ERROR] ... fails its CRC check' and exited 0."""
+    source, bag = tmp_path / "source.mcap", tmp_path / "crc.mcap"
+    write_test_bag(source, frames=2)
+    with BagWriter(bag, compression="none") as out:       # the pixels as they are
+        for raw in BagReader(source).raw_messages():
+            out.write_raw(raw.topic, raw.schema_name, raw.data, raw.log_time_ns)
+    data = bytearray(bag.read_bytes())
+    middle = len(data) // 3                 # inside an image's pixels: the chunk CRC fails
+    data[middle:middle + 16] = bytes(16)
+    bag.write_bytes(bytes(data))
+    process = start_node("tactile_sl_camera", "replay", domain_id,
+                         ["-p", f"bag:={bag}"], tmp_path / "replay.log")
+    code = process.wait(30)
+    log = (tmp_path / "replay.log").read_text()
+    assert code == 1 and "CRC" in log and "FATAL" in log, log
+    assert "Traceback" not in log and "finished:" not in log, log

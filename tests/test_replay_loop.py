@@ -50,3 +50,43 @@ def test_looping_replay_keeps_stamps_moving_forward(tmp_path):
     assert len(got) >= 5, log
     assert all(b > a for a, b in zip(got, got[1:])), f"stamps not increasing: {got}"
     assert "loop implies restamp" in log
+
+
+def test_a_loop_keeps_the_recorded_frame_rate_across_the_wrap(tmp_path):
+    """Issue 28, item 13: a looping 10 Hz bag played at 11.7 Hz (7 frames) and 13.3 Hz
+    (4 frames): the next pass started at once, one frame period missing at each wrap."""
+    import numpy as np
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    from tactile_sl_camera.bag_io import BagWriter
+    from tactile_sl_camera.images import image_fields
+
+    bag = tmp_path / "four.mcap"
+    with BagWriter(bag) as out:
+        for i in range(4):                              # 10 Hz
+            t = 1_700_000_000 * 10**9 + i * 100_000_000
+            header = {"stamp": {"sec": t // 10**9, "nanosec": t % 10**9}, "frame_id": "cam"}
+            for side in ("left", "right"):
+                out.write(f"/tactile/{side}/image_raw", "sensor_msgs/msg/Image",
+                          {"header": header, **image_fields(np.zeros((8, 8), np.uint8))}, t)
+    domain = next_domain_id()
+    probe = Probe("wrap_listener", domain, namespace="/tactile")
+    got: list[int] = []
+    probe.node.create_subscription(Image, "left/image_raw", lambda m: got.append(
+        m.header.stamp.sec * 10**9 + m.header.stamp.nanosec), qos_profile_sensor_data)
+    proc = start_node("tactile_sl_camera", "replay", domain, [
+        "-r", "__ns:=/tactile", "-p", f"bag:={bag}", "-p", "loop:=true", "-p", "loops:=5",
+        "-p", "wait_for_subscribers:=1"], tmp_path / "replay.log")
+    try:
+        probe.spin_until(lambda: len(got) >= 20 or proc.poll() is not None, 40.0)
+        probe.spin(0.3)
+    finally:
+        stop(proc)
+        probe.close()
+    log = (tmp_path / "replay.log").read_text()
+    assert len(got) >= 16, log
+    steps = np.diff(got) / 1e9
+    rate = (len(got) - 1) / ((got[-1] - got[0]) / 1e9)
+    assert 9.0 < rate < 11.0, (rate, steps)
+    assert np.median(steps[3::4]) > 0.08, steps          # across each wrap: one period

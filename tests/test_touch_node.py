@@ -111,14 +111,17 @@ def _same(a, b) -> bool:
                                       for f in a.get_fields_and_field_types())
 
 
-def test_bad_sensor_file_is_one_fatal_line(ros, tmp_path):
+@pytest.mark.parametrize("elastomer, named", [
+    ("{youngs_modulus: -3.0e+5, poisson_ratio: 0.49, thickness: 0.0}", "youngs_modulus"),
+    # issue 28, item 3: a layer too thin to model; the node died at the first frame
+    ("{youngs_modulus: 3.0e+5, poisson_ratio: 0.49, thickness: 1.0e-5}", "thickness")])
+def test_bad_sensor_file_is_one_fatal_line(ros, tmp_path, elastomer, named):
     bad = tmp_path / "sensor.yaml"
-    bad.write_text("tactile_sl_sensor: 1\nelastomer: {youngs_modulus: -3.0e+5, "
-                   "poisson_ratio: 0.49, thickness: 0.0}\n")
+    bad.write_text(f"tactile_sl_sensor: 1\nelastomer: {elastomer}\n")
     proc = ros.start("-p", f"sensor_file:={bad}")
     code = proc.process.wait(30)
     text = proc.log()
-    assert code == 1 and "FATAL" in text and "youngs_modulus" in text, text
+    assert code == 1 and "FATAL" in text and named in text, text
     assert "Traceback" not in text
 
 

@@ -16,7 +16,8 @@ from typing import Callable, Iterable, Iterator
 import cv2
 import numpy as np
 
-from .camera_info import CameraCalibration, save_camera_info_yaml
+from .camera_info import CameraCalibration, camera_info_yaml_text
+from .safe_files import write_files
 
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm")
@@ -54,9 +55,11 @@ class StereoCalibrationResult:
 
     def save(self, directory: str | os.PathLike, left_name: str = "left.yaml",
              right_name: str = "right.yaml") -> tuple[pathlib.Path, pathlib.Path]:
-        d = pathlib.Path(directory)
-        return (save_camera_info_yaml(d / left_name, self.left),
-                save_camera_info_yaml(d / right_name, self.right))
+        """Write both camera_calibration YAML files, both or neither (safe_files.write_files)."""
+        left, right = write_files(directory, {
+            left_name: camera_info_yaml_text(self.left).encode(),
+            right_name: camera_info_yaml_text(self.right).encode()})
+        return left, right
 
 
 def board_points(pattern: tuple[int, int], square: float) -> np.ndarray:
@@ -146,12 +149,29 @@ def _read(path: pathlib.Path) -> np.ndarray:
     return image
 
 
-def folder_pairs(folder: str | os.PathLike) -> list[tuple[pathlib.Path, pathlib.Path]]:
-    """Image pairs in a folder: every file with 'left' in its name and its 'right' twin."""
+def _folder_images(folder: str | os.PathLike) -> dict[str, pathlib.Path]:
     d = pathlib.Path(folder)
     if not d.is_dir():
         raise CalibrationError(f"{d}: not a folder")
-    files = {p.name: p for p in d.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES}
+    return {p.name: p for p in d.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES}
+
+
+def unpaired_images(folder: str | os.PathLike) -> list[pathlib.Path]:
+    """Images named for one camera ('left' or 'right') whose twin is missing: not used."""
+    files = _folder_images(folder)
+    return [files[name] for name in sorted(files)
+            if ("left" in name and name.replace("left", "right") not in files)
+            or ("right" in name and "left" not in name
+                and name.replace("right", "left") not in files)]
+
+
+def folder_pairs(folder: str | os.PathLike) -> list[tuple[pathlib.Path, pathlib.Path]]:
+    """Image pairs in a folder: every file with 'left' in its name and its 'right' twin.
+
+    Images without a twin are left out; :func:`unpaired_images` names them.
+    """
+    d = pathlib.Path(folder)
+    files = _folder_images(d)
     pairs = []
     for name in sorted(files):
         if "left" in name:

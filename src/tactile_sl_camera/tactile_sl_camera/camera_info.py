@@ -260,8 +260,8 @@ def camera_info_yaml_text(calib: CameraCalibration) -> str:
 
 
 def save_camera_info_yaml(path: str | os.PathLike, calib: CameraCalibration) -> pathlib.Path:
-    """Write one camera's calibration as camera_calibration YAML; returns the path."""
+    """Write one camera's calibration as camera_calibration YAML (atomically); the path."""
+    from .safe_files import write_files
+
     p = pathlib.Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(camera_info_yaml_text(calib))
-    return p
+    return write_files(p.parent, {p.name: camera_info_yaml_text(calib).encode()})[0]

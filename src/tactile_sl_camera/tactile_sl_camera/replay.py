@@ -7,6 +7,7 @@ renaming, pacing and restamping rules are tested here without a ROS graph.
 from __future__ import annotations
 
 import os
+import statistics
 from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
@@ -22,6 +23,9 @@ from tactile_sl_camera.bag_io import (
 IMAGE_TYPE = "sensor_msgs/msg/Image"
 CAMERA_INFO_TYPE = "sensor_msgs/msg/CameraInfo"
 DEFAULT_TYPES = (IMAGE_TYPE, CAMERA_INFO_TYPE)
+ONE_FRAME_LOOP_PERIOD_NS = 100_000_000
+"""A bag of one stereo frame has no recorded rate: looped, it plays at 10 Hz x ``rate``
+(the bundled bags' rate) rather than publishing as fast as the thread can spin."""
 HEADER_FIRST_TYPES = {IMAGE_TYPE, CAMERA_INFO_TYPE, "sensor_msgs/msg/PointCloud2",
                       "sensor_msgs/msg/CompressedImage", "tactile_sl_msgs/msg/SymbolArray"}
 
@@ -86,6 +90,9 @@ class ReplayPlan:
                                f"topics to replay (the bag has: {have})")
         self.outputs = {t: relative_name(t, bag_namespace) for t in self.bag_topics}
         self.types = {t: self.reader.topics[t].schema_name for t in self.bag_topics}
+        # measured by the first pass played to its end (items()): ns, None until then
+        self.span_ns: int | None = None             # first to last log time
+        self.frame_period_ns: int | None = None     # median step between frame stamps
 
     def _absolute(self, relative: str) -> str:
         ns = "/" + self.bag_namespace.strip("/") if self.bag_namespace.strip("/") else ""
@@ -96,17 +103,49 @@ class ReplayPlan:
         return sum(self.reader.topics[t].message_count for t in self.bag_topics)
 
     def items(self, loop_index: int = 0) -> Iterator[ReplayItem]:
-        """One pass over the bag, with each message's recorded header stamp."""
+        """One pass over the bag, with each message's recorded header stamp.
+
+        A pass played to its end also measures the bag: its span (first to last log time)
+        and its frame period (median step between successive frame stamps), which
+        :meth:`next_pass_start` needs to loop at the recorded rate.
+        """
         start_ns: int | None = None
+        last_ns = 0
+        stamps: list[int] = []
         for raw in self.reader.raw_messages(self.bag_topics):
             if start_ns is None:
                 start_ns = raw.log_time_ns
+            last_ns = raw.log_time_ns
             due = 0.0 if self.rate == 0 else (raw.log_time_ns - start_ns) / 1e9 / self.rate
             stamp_ns = raw.log_time_ns
             if raw.schema_name in HEADER_FIRST_TYPES:
                 stamp_ns = stamp_to_ns(*header_stamp_of_cdr(raw.data))
+            if not stamps or stamp_ns != stamps[-1]:
+                stamps.append(stamp_ns)
             yield ReplayItem(self.outputs[raw.topic], raw.schema_name, raw.data, due, stamp_ns,
                              loop_index)
+        if start_ns is not None:
+            frames = sorted(set(stamps))
+            steps = [b - a for a, b in zip(frames, frames[1:])]
+            self.span_ns = last_ns - start_ns
+            self.frame_period_ns = (int(statistics.median(steps)) if steps
+                                    else ONE_FRAME_LOOP_PERIOD_NS)
+
+    def next_pass_start(self, pass_start: float, last_published: float) -> float:
+        """When (clock of ``pass_start``, seconds) the next pass of a loop starts.
+
+        One frame period (at this rate) after the last frame, as the recording would have
+        gone on: ``pass_start`` + (span + period) / rate on schedule, and never less than a
+        period after ``last_published`` when playing fell behind it (pacing, a slow
+        machine).  Looping used to start the next pass at once, which dropped a frame
+        period at every wrap (a 7-frame 10 Hz bag looped at 11.7 Hz).  At rate 0, or
+        before a pass has been played to its end: ``last_published``.
+        """
+        if self.rate == 0 or self.span_ns is None or self.frame_period_ns is None:
+            return last_published
+        period = self.frame_period_ns / 1e9 / self.rate
+        return max(pass_start + self.span_ns / 1e9 / self.rate + period,
+                   last_published + period)
 
 
 class Restamper:

@@ -9,12 +9,20 @@ Every command that writes a file (``tactile-sl replay -o``, ``train -o``, ``eval
   work starts;
 * :func:`atomic_path` yields a temporary file in the target directory and renames it over
   the target only when the block ends without an exception, so an interrupted or failed run
-  leaves an existing output untouched and never leaves a stub.
+  leaves an existing output untouched and never leaves a stub;
+* :func:`write_files` writes a set of files that belong together (``calibrate``'s
+  ``left.yaml``, ``right.yaml``, ``coverage.png``; ``sensor.yaml``) all or none, after
+  :func:`check_outputs` has refused, before any work, targets that cannot be written.
+
+Outputs get the mode a plain ``open()`` gives (0666 less the umask), not the 0600 of the
+temporary file they are written as.
 """
 from __future__ import annotations
 
 import contextlib
 import os
+import secrets
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Iterable, Iterator
@@ -74,6 +82,96 @@ def check_output(output: str | os.PathLike, inputs: Iterable[str | os.PathLike] 
     return out
 
 
+def _file_mode() -> int:
+    """The mode a new file gets from ``open()``: 0666 less the process umask."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
+def check_outputs(directory: str | os.PathLike, names: Iterable[str]) -> Path:
+    """Refuse, before any work, a set of outputs in ``directory`` that cannot be written.
+
+    ``directory`` may not exist yet (it is created when writing); its nearest existing
+    ancestor must then be a writable directory.  Each ``directory / name`` that exists must
+    be a regular file (it is replaced).  Raises :class:`OutputError` naming the path.
+    """
+    d = Path(directory)
+    if d.exists() and not d.is_dir():
+        raise OutputError(f"cannot write into {d}: it is not a directory")
+    for name in names:
+        target = d / name
+        if target.exists() and not target.is_file():
+            raise OutputError(f"cannot write {target}: it exists and is not a regular file")
+    existing = d
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OutputError(f"cannot create {d}: {existing} is not a directory")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".probe.", suffix=".probe", dir=existing)
+    except OSError as exc:
+        raise OutputError(f"cannot write into {existing}: {exc.strerror or exc}") from None
+    os.close(fd)
+    os.unlink(probe)
+    return d
+
+
+def write_files(directory: str | os.PathLike, files: dict[str, bytes]) -> list[Path]:
+    """Write every file into ``directory``, all or none; returns the paths written.
+
+    Each file is written to a temporary name beside its target first; only when all are
+    written are they renamed onto their targets.  Should a rename still fail (the target
+    turned into a directory meanwhile, a full or read-only file system), the targets
+    already renamed are put back as they were (an earlier file restored from a hard-linked
+    copy, a new one removed) and :class:`OutputError` is raised.
+    """
+    d = check_outputs(directory, files)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create {d}: {exc.strerror or exc}") from None
+    mode = _file_mode()
+    temps: dict[str, Path] = {}
+    backups: dict[str, Path] = {}
+    done: list[str] = []
+    try:
+        for name, data in files.items():
+            fd, tmp_name = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=d)
+            temps[name] = Path(tmp_name)
+            with os.fdopen(fd, "wb") as fh:
+                os.fchmod(fh.fileno(), mode)
+                fh.write(data)
+        for name in files:                 # earlier versions, to put back on a failure
+            if (d / name).is_file():
+                backups[name] = d / f".{name}.{secrets.token_hex(4)}.bak"
+                try:
+                    os.link(d / name, backups[name])
+                except OSError:            # no hard links here: a copy does
+                    shutil.copy2(d / name, backups[name])
+        for name in files:
+            os.replace(temps[name], d / name)
+            del temps[name]
+            done.append(name)
+        return [d / name for name in files]
+    except BaseException as exc:          # Ctrl-C included: the set stays as it was
+        for name in reversed(done):
+            with contextlib.suppress(OSError):
+                if name in backups:
+                    os.replace(backups.pop(name), d / name)
+                else:
+                    (d / name).unlink()
+        if not isinstance(exc, OSError):
+            raise
+        target = getattr(exc, "filename2", None) or getattr(exc, "filename", None) or d
+        raise OutputError(f"cannot write {target}: {exc.strerror or exc}; nothing written "
+                          f"to {d}") from None
+    finally:
+        for leftover in list(temps.values()) + list(backups.values()):
+            with contextlib.suppress(OSError):
+                leftover.unlink()
+
+
 @contextlib.contextmanager
 def atomic_path(output: str | os.PathLike) -> Iterator[Path]:
     """A temporary path next to ``output``, renamed onto it if the block succeeds.
@@ -91,9 +189,7 @@ def atomic_path(output: str | os.PathLike) -> Iterator[Path]:
     tmp = Path(tmp_name)
     try:
         yield tmp
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        os.chmod(tmp, _file_mode())
         os.replace(tmp, out)
     except BaseException:
         with contextlib.suppress(OSError):

@@ -8,6 +8,7 @@ from scipy import special
 from tactile_sl_camera.elasticity import (
     Elastomer,
     cell_kernel,
+    check_layer_resolved,
     fourier_compliance,
     layer_compliance,
     point_green,
@@ -204,3 +205,15 @@ def test_bad_grid_input() -> None:
     with pytest.raises(ValueError, match="non-finite"):
         surface_displacement(HALF, np.full((4, 4, 3), np.nan), 0.001)
     assert Elastomer(E, NU).shear_modulus == pytest.approx(E / (2 * (1 + NU)))
+
+
+def test_a_layer_thinner_than_a_quarter_cell_is_refused() -> None:
+    """Issue 28, item 3: 10 um on a 0.5 mm pitch zeroed the whole kernel (the inversion then
+    failed with a LinAlgError), 20 um was 14x too compliant; both are now a clear error."""
+    s = 0.0005
+    for h in (1e-5, 2e-5, 0.2 * s):
+        with pytest.raises(ValueError, match="quarter of the cell pitch"):
+            cell_kernel(Elastomer(E, NU, h), s, 3, 3)
+    K = cell_kernel(Elastomer(E, NU, 0.25 * s), s, 3, 3)     # the thinnest resolved layer
+    assert np.isfinite(K).all() and K[2, 2, 2, 2] > 0
+    check_layer_resolved(HALF, s)

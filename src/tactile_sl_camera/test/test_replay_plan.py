@@ -67,3 +67,32 @@ def test_bag_without_camera_topics_is_an_error(tmp_path):
         ReplayPlan(path)
     with pytest.raises(ValueError, match="rate must be >= 0"):
         ReplayPlan(path, topics=["/chatter"], rate=-1)
+
+
+def test_a_loop_starts_the_next_pass_one_frame_period_after_the_last(bag):
+    """Issue 28, item 13: the next pass started at once, so a looping 10 Hz bag of 7 frames
+    played at 11.7 Hz (and of 4 frames at 13.3 Hz): one frame period missing at each wrap."""
+    plan = ReplayPlan(bag, rate=1.0)
+    assert plan.next_pass_start(10.0, 10.2) == 10.2          # nothing measured yet
+    list(plan.items())                                         # three frames, 0.1 s apart
+    assert plan.span_ns == 200_000_000 and plan.frame_period_ns == 100_000_000
+    assert plan.next_pass_start(10.0, 10.2) == pytest.approx(10.3)   # on schedule
+    assert plan.next_pass_start(10.0, 11.0) == pytest.approx(11.1)   # behind: a period on
+    half = ReplayPlan(bag, rate=2.0)
+    list(half.items())
+    assert half.next_pass_start(10.0, 10.1) == pytest.approx(10.15)
+    fast = ReplayPlan(bag, rate=0)
+    list(fast.items())
+    assert fast.next_pass_start(10.0, 10.01) == 10.01
+
+
+def test_a_bag_of_one_frame_loops_at_10_hz(tmp_path):
+    path = tmp_path / "one.mcap"
+    with BagWriter(path) as writer:
+        writer.write("/tactile/left/image_raw", "sensor_msgs/msg/Image",
+                     {"header": {"stamp": {"sec": 5, "nanosec": 0}, "frame_id": "left"},
+                      **image_fields(np.zeros((2, 2), np.uint8))}, 5 * 10**9)
+    plan = ReplayPlan(path, rate=2.0)
+    list(plan.items())
+    assert plan.span_ns == 0 and plan.frame_period_ns == 100_000_000
+    assert plan.next_pass_start(10.0, 10.001) == pytest.approx(10.051)   # not a busy loop

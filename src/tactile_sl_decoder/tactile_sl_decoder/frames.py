@@ -41,20 +41,23 @@ def count_bag_frames(path: str | Path, namespace: str = "/tactile") -> int:
 
 
 def bag_frames(path: str | Path, namespace: str = "/tactile",
-               ground_truth: bool = True) -> Any:
+               ground_truth: bool = True, camera_info: bool = True) -> Any:
     """Stereo frames of a bag, grouped by exact header stamp, in stamp order.
 
     Messages of one frame may come in any order; a frame is complete once both images are
     there.  CameraInfo may be sent less often than images: the latest one of each side is
-    used then.  Raises ``BagError`` for unreadable bags or missing image topics.
+    used then.  Raises ``BagError`` for unreadable bags or missing image topics, and for
+    missing camera_info topics unless ``camera_info`` is False (the caller has the
+    calibration from elsewhere: the frames' infos are then None where the bag has none).
     """
     from tactile_sl_camera.bag_io import BagReader, header_stamp_of_cdr
 
     reader = BagReader(path)
     topics = bag_topics(namespace)
-    reader.require_topics([topics["left_image"], topics["right_image"],
-                           topics["left_info"], topics["right_info"]])
-    wanted = [topics[k] for k in ("left_image", "right_image", "left_info", "right_info")]
+    images = [topics["left_image"], topics["right_image"]]
+    infos = [topics["left_info"], topics["right_info"]]
+    reader.require_topics(images + infos if camera_info else images)
+    wanted = images + [t for t in infos if camera_info or t in reader.topics]
     if ground_truth and topics["ground_truth"] in reader.topics:
         wanted.append(topics["ground_truth"])
     part_of = {v: k for k, v in topics.items()}

@@ -422,8 +422,8 @@ class StereoPipeline:
         """
         t0 = time.perf_counter()
         rig = self.rig(left_info, right_info)
-        _check_image(left_gray, rig.left, "left")
-        _check_image(right_gray, rig.right, "right")
+        check_image(left_gray, rig.left, "left")
+        check_image(right_gray, rig.right, "right")
         t1 = time.perf_counter()
         if self._pool is None:
             left, right = self.extract_pair(left_gray, right_gray)
@@ -549,7 +549,8 @@ def _info_key(info: Any) -> tuple:
     return (get("width"), get("height"), get("distortion_model"), frame, *vals)
 
 
-def _check_image(gray: np.ndarray, cam: Any, side: str) -> None:
+def check_image(gray: np.ndarray, cam: Any, side: str) -> None:
+    """Raise PipelineInputError unless ``gray`` is a grey image of its CameraInfo's size."""
     if gray.ndim != 2 or gray.size == 0:
         raise PipelineInputError(f"{side} image is empty or not a grey image "
                                  f"(shape {gray.shape})")

@@ -231,3 +231,28 @@ def test_corrupt_archive_entry_is_a_weights_file_error(tmp_path):
         read_torch_zip(path)
     with pytest.raises(ClassifierError):
         Classifier.load(path)
+
+
+@pytest.mark.parametrize("content", ["random bytes", "a pickled dict", "a pickle with code",
+                                     "a broken zip"])
+def test_a_garbage_weights_file_gets_no_advice_to_unpickle_it(tmp_path, content, capsys):
+    """Issue 28, item 14: the error repeated torch's advice to retry with
+    weights_only=False, which runs the file's code: never for an untrusted file."""
+    import pickle
+
+    path = tmp_path / "garbage.pt"
+    if content == "random bytes":
+        path.write_bytes(np.random.default_rng(0).integers(0, 256, 3000, np.uint8).tobytes())
+    elif content == "a pickled dict":
+        path.write_bytes(pickle.dumps({"format": FORMAT}, protocol=4))
+    elif content == "a pickle with code":
+        path.write_bytes(pickle.dumps(print, protocol=2))
+    else:
+        path.write_bytes(b"PK\x03\x04" + bytes(200))
+    with pytest.raises(ClassifierError) as info:
+        Classifier.load(path)
+    text = str(info.value)
+    assert "not a loadable weights file" in text and str(path) in text
+    assert "weights_only" not in text and "False" not in text, text
+    assert "\n" not in text and len(text) < 600, text
+    assert "Warning" not in capsys.readouterr().err

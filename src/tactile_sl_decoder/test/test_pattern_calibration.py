@@ -4,6 +4,7 @@ Views are rendered by the simulator (flat artwork at known poses, 30 % hidden, b
 noise) with supersampling off to keep the suite fast; the true calibration is the rig's.
 """
 import argparse
+import os
 import pathlib
 
 import cv2
@@ -266,3 +267,70 @@ def test_refine_cli_repairs_a_knocked_camera(untouched_bag, renderer, tmp_path, 
     assert _cli("--refine", untouched_bag, "--calibration", tmp_path, "--target", "-o", out) == 0
     assert _cli("--check", untouched_bag, "--calibration", out, "--target") == 0
     assert "verdict: PASS" in capsys.readouterr().out
+
+
+# --------------------------------------------------------------------------- outputs (issue 28)
+
+
+@pytest.mark.parametrize("blocked, mode", [("right.yaml", "target"), ("coverage.png", "target"),
+                                           ("right.yaml", "board")])
+def test_outputs_are_written_all_or_none(view_dir, tmp_path, capsys, blocked, mode):
+    """Item 6: with right.yaml (or coverage.png) a folder, left.yaml (and right.yaml) were
+    written although the command failed; now it refuses before any work."""
+    out = tmp_path / "out"
+    (out / blocked).mkdir(parents=True)
+    args = ["--target"] if mode == "target" else ["--pattern", "9x6"]
+    assert _cli("--folder", view_dir, *args, "-o", out) == 1
+    err = capsys.readouterr().err
+    assert f"{out / blocked}: it exists and is not a regular file" in err, err
+    assert sorted(p.name for p in out.iterdir()) == [blocked]
+
+
+def test_outputs_are_readable_by_everyone_under_umask_022(view_dir, tmp_path):
+    """Item 6: every output was created 0600 (its temporary file's mode)."""
+    umask = os.umask(0o022)
+    try:
+        assert _cli("--folder", view_dir, "--target", "-o", tmp_path / "out") == 0
+    finally:
+        os.umask(umask)
+    modes = {p.name: p.stat().st_mode & 0o777 for p in (tmp_path / "out").iterdir()}
+    assert modes == {"left.yaml": 0o644, "right.yaml": 0o644, "coverage.png": 0o644}
+
+
+def test_unpaired_images_are_named(view_dir, tmp_path, capsys):
+    """Item 9: 6 left and 4 right images said 'pairs used 4/4' and nothing of the other two."""
+    folder = tmp_path / "v"
+    folder.mkdir()
+    for i in range(6):
+        for side in ("left", "right"):
+            if side == "left" or i < 4:
+                name = f"{side}_{i:03d}.png"
+                (folder / name).write_bytes((view_dir / name).read_bytes())
+    assert _cli("--folder", folder, "--target", "-o", tmp_path / "out") == 0
+    err = capsys.readouterr().err
+    assert "2 image(s) without a partner, not used: left_004.png, left_005.png" in err, err
+
+
+def test_check_and_refine_take_the_calibration_files_for_a_bag_without_camera_info(
+        untouched_bag, renderer, tmp_path, capsys):
+    """Item 10: --check / --refine demanded the bag's camera_info topics although
+    --calibration DIR (or --left-info / --right-info) gave the calibration."""
+    from tactile_sl_camera.bag_io import BagReader, BagWriter
+
+    bag = tmp_path / "images_only.mcap"
+    with BagWriter(bag) as out:
+        for raw in BagReader(untouched_bag).raw_messages():
+            if raw.topic.endswith("image_raw"):
+                out.write_raw(raw.topic, raw.schema_name, raw.data, raw.log_time_ns)
+    save_camera_info_yaml(tmp_path / "left.yaml", renderer.rig.left_info)
+    save_camera_info_yaml(tmp_path / "right.yaml", renderer.rig.right_info)
+    assert _cli("--check", bag, "--calibration", tmp_path, "--target") == 0
+    assert _cli("--check", bag, "--left-info", tmp_path / "left.yaml", "--right-info",
+                tmp_path / "right.yaml", "--target") == 0
+    assert "verdict: PASS" in capsys.readouterr().out
+    assert _cli("--refine", bag, "--calibration", tmp_path, "--target",
+                "-o", tmp_path / "refined") == 0
+    assert (tmp_path / "refined" / "right.yaml").is_file()
+    assert _cli("--check", bag, "--target") == 1          # no calibration anywhere
+    err = capsys.readouterr().err
+    assert "camera_info" in err, err

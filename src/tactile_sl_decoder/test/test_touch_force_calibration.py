@@ -1,5 +1,7 @@
 """Force calibration recovers the modulus from known loads; bad input writes nothing."""
 
+import os
+
 import numpy as np
 import pytest
 from test_touch_traction import PITCH, SHAPE, _displacement
@@ -78,10 +80,16 @@ def test_cli_recovers_the_bag_modulus_within_5_percent(tmp_path):
     start.write_text("tactile_sl_sensor: 1\nelastomer: {youngs_modulus: 1.0e+5, "
                      "poisson_ratio: 0.49, thickness: 0.0}\n")
     out = tmp_path / "out"
-    assert cli_main(["calibrate", "--bag", str(BAG), "--loads", str(loads), "--sensor",
-                     str(start), "-o", str(out)]) == 0
+    umask = os.umask(0o022)
+    try:
+        assert cli_main(["calibrate", "--bag", str(BAG), "--loads", str(loads), "--sensor",
+                         str(start), "-o", str(out)]) == 0
+    finally:
+        os.umask(umask)
     fitted = load_sensor(out / "sensor.yaml").elastomer.youngs_modulus
     assert abs(fitted / 3.0e5 - 1) < 0.05          # the scene's true modulus
+    # issue 28, item 6: readable by the robot's other users (it was 0600, the temp file's)
+    assert (out / "sensor.yaml").stat().st_mode & 0o777 == 0o644
     # a bad loads file: one clear error, nothing written
     bad_out = tmp_path / "bad"
     loads.write_text("loads: [{frame: 1, normal_force: 0.1}]")

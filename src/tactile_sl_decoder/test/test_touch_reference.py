@@ -72,3 +72,14 @@ def test_builder_averages_cells_seen_in_half_the_frames():
     assert np.allclose(mean[0], 3.0) and np.allclose(mean[1], 2.0)
     with pytest.raises(ValueError):
         ReferenceBuilder(0, (2, 2))
+
+
+def test_a_suspect_fit_residual_is_worded_for_the_user():
+    """Issue 28, item 8: a pressed reference (130.9 um RMS) was only an INFO line."""
+    from tactile_sl_decoder.touch.reference import RESIDUAL_WARN_M, residual_warning
+
+    assert residual_warning(2e-6) is None and residual_warning(RESIDUAL_WARN_M) is None
+    text = residual_warning(1.309e-4)
+    assert text is not None and "130.9 um RMS > 20 um" in text and "touched" in text
+    assert "calibration" in text and "tare" in text
+    assert residual_warning(float("nan")) is not None

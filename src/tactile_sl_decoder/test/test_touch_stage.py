@@ -85,6 +85,11 @@ def test_bad_settings_are_refused():
         TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=0))
     with pytest.raises(ValueError, match="pitch"):
         TouchStage(sensor, SHAPE, 0.0)
+    # issue 28, item 3: a layer the kernel cannot resolve is refused at load (it used to fail
+    # with a LinAlgError when the first reference was prepared)
+    thin = SensorConfig(Elastomer(3e5, 0.49, 1e-5), source="thin.yaml")
+    with pytest.raises(ValueError, match="thin.yaml: .*quarter of the cell pitch"):
+        TouchStage(thin, SHAPE, PITCH)
 
 
 @pytest.mark.parametrize("thickness", [0.0, 0.002])
@@ -220,3 +225,24 @@ def test_a_tare_with_the_same_cells_reuses_the_inversion():
     assert live.tare()[0]
     assert live.update(_points(_displacement(sensor.elastomer, [], 2e-6, rng), drop=[3])) is None
     assert live.preparing
+
+
+def test_contact_thresholds_changed_live_apply_to_the_next_frame():
+    """Issue 28, item 2: contact_force_on/off set live were accepted and ignored (the stage
+    kept a copy of the thresholds taken with the reference)."""
+    sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
+    stage = TouchStage(sensor, SHAPE, PITCH)
+    rng = np.random.default_rng(5)
+    stage.update(_points(_displacement(sensor.elastomer, [], 0.5e-6, rng)))
+
+    def frame(newtons):
+        disp = _displacement(sensor.elastomer, [(0.0, 0.0, -newtons, 2e-3, 0.0, 0.0)], 0.5e-6,
+                             rng)
+        return stage.update(_points(disp)).contact
+
+    assert frame(0.05).in_contact and frame(0.5).in_contact        # defaults: 10 / 5 mN
+    stage.params.contact.force_on, stage.params.contact.force_off = 1.0, 0.8
+    assert not frame(0.05).in_contact and not frame(0.5).in_contact
+    assert frame(1.2).in_contact and frame(0.9).in_contact          # on above 1 N, held ...
+    assert not frame(0.5).in_contact                                # ... off below 0.8 N
+    assert stage.contact_params.area_fraction == stage.solver.area_fraction

@@ -134,6 +134,7 @@ class ReplayNode(Node):
                                      declare_qos(live, "pace", "the wait_for_topic "
                                                  "subscription", 10))
         self.done = threading.Event()
+        self.failure: BagError | None = None    # why playing stopped early (exit status 1)
         self._done_at: float | None = None
         self._stopping = threading.Event()
         self.published = 0
@@ -149,7 +150,14 @@ class ReplayNode(Node):
         return rclpy.ok() and not self._stopping.is_set() and not stop.requested()
 
     def finished(self) -> bool:
-        """The bag has been played (exit_on_end), and 0.3 s passed for the last delivery."""
+        """The bag has been played (exit_on_end), and 0.3 s passed for the last delivery.
+
+        Raises the BagError that stopped the playing thread (a chunk failing its CRC, a
+        message that cannot be read), so that the node ends with one FATAL line and exit
+        status 1 instead of looking like a bag played to its end.
+        """
+        if self.failure is not None:
+            raise self.failure
         if not (self.exit_on_end and self.done.is_set()):
             return False
         if self._done_at is None:
@@ -199,19 +207,23 @@ class ReplayNode(Node):
             if self.min_subscribers > 0:
                 self._wait_for_subscribers()
             loop_index = 0
+            start = time.monotonic()
             while self._running():
-                self._play_pass(loop_index)
+                last = self._play_pass(loop_index, start)
                 loop_index += 1
                 if not self.loop or (self.loops > 0 and loop_index >= self.loops):
                     break
+                # one frame period after the last frame, as the recording would go on
+                start = self.plan.next_pass_start(start, last)
             self.get_logger().info(f"finished: {self.published} messages published")
         except BagError as exc:
-            self.get_logger().error(str(exc))
+            self.failure = exc         # raised by finished(): FATAL, exit status 1
         finally:
             self.done.set()
 
-    def _play_pass(self, loop_index: int) -> None:
-        start = time.monotonic()
+    def _play_pass(self, loop_index: int, start: float) -> float:
+        """Publish one pass, scheduled from ``start`` (monotonic s); when its last went out."""
+        last = time.monotonic()
         restamper = Restamper(lambda: self.get_clock().now().nanoseconds) if self.restamp else None
         recorded: int | None = None     # recorded stamp of the frame being published
         published: int | None = None    # stamp it went out with
@@ -223,15 +235,17 @@ class ReplayNode(Node):
             if delay > 0:
                 self._stopping.wait(delay)
             if not self._running():
-                return
+                return last
             data, stamp = restamper(item) if restamper else (item.data, item.stamp_ns)
             if self.frame_prefix and item.schema_name in HEADER_FIRST_TYPES:
                 data = prefix_frame_id(data, item.schema_name, self.frame_prefix)
             self.publishers_by_topic[item.topic].publish(data)
+            last = time.monotonic()
             self.published += 1
             recorded, published = item.stamp_ns, stamp
         if self.pacing and published is not None:
             self._wait_for_ack(published)
+        return last
 
 
 def main(args: list[str] | None = None) -> None:

@@ -14,6 +14,5 @@ from .solve import (  # noqa: F401
     ViewReport,
     calibrate_pattern_stereo,
     coverage_image,
-    write_atomically,
 )
 from .views import CameraView, PatternTarget, StereoView, ViewDecoder  # noqa: F401

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import os
 import pathlib
-import tempfile
 from dataclasses import dataclass, field
 
 import cv2
@@ -33,6 +32,7 @@ import numpy as np
 
 from tactile_sl_camera.calibration import CalibrationError, StereoCalibrationResult
 from tactile_sl_camera.camera_info import CameraCalibration, camera_info_yaml_text
+from tactile_sl_camera.safe_files import write_files
 
 from .views import CameraView, PatternTarget, StereoView
 
@@ -114,7 +114,7 @@ class PatternCalibration:
 
     def save(self, directory: str | os.PathLike, coverage: bool = True
              ) -> list[pathlib.Path]:
-        """Write left.yaml, right.yaml (and coverage.png) atomically; returns the paths."""
+        """Write left.yaml, right.yaml (and coverage.png), all or none; returns the paths."""
         files: dict[str, bytes] = {
             "left.yaml": camera_info_yaml_text(self.left).encode(),
             "right.yaml": camera_info_yaml_text(self.right).encode()}
@@ -122,33 +122,7 @@ class PatternCalibration:
             ok, png = cv2.imencode(".png", coverage_image(self))
             if ok:
                 files["coverage.png"] = png.tobytes()
-        return write_atomically(directory, files)
-
-
-def write_atomically(directory: str | os.PathLike, files: dict[str, bytes]
-                     ) -> list[pathlib.Path]:
-    """Write every file to a temporary name in ``directory``, then rename them all.
-
-    Nothing is renamed until every file is written, so a failure leaves no partial set.
-    """
-    d = pathlib.Path(directory)
-    d.mkdir(parents=True, exist_ok=True)
-    temps: list[tuple[str, pathlib.Path]] = []
-    try:
-        for name, data in files.items():
-            fd, tmp_name = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=d)
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(data)
-            temps.append((name, pathlib.Path(tmp_name)))
-        out = []
-        for name, tmp in temps:
-            os.replace(tmp, d / name)
-            out.append(d / name)
-        return out
-    finally:
-        for _, tmp in temps:
-            if tmp.exists():
-                tmp.unlink()
+        return write_files(directory, files)
 
 
 # --------------------------------------------------------------------------- per camera

@@ -28,6 +28,8 @@ can correct the glyph from its neighbours instead of trusting a guess.
 """
 from __future__ import annotations
 
+import pickle
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -377,16 +379,36 @@ _NETS: dict[str, type[FastLeNet] | type[FastTiny]] = {LENET_ARCH: FastLeNet,
 
 
 def _torch_load(path: Path, reason: WeightsFileError) -> Any:
-    """``torch.load(weights_only=True)`` of a file the torch-free reader refused."""
+    """``torch.load(weights_only=True)`` of a file the torch-free reader refused.
+
+    torch's own messages are not passed on whole: for a file holding anything but plain
+    tensors they advise loading it again with the restriction off, which runs whatever code
+    the file carries, advice a user must not follow for a file of unknown origin.
+    """
     try:
         import torch
     except ImportError:
         raise ClassifierError(f"{path}: not a loadable weights file ({reason})") from None
     try:
-        return torch.load(path, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():     # torch warns about pickle protocols first
+            warnings.simplefilter("ignore")
+            return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError:
+        raise ClassifierError(
+            f"{path}: not a loadable weights file ({reason}; torch's tensor-only loader "
+            f"refused it too: it is not plain tensors). Use weights written by `tactile-sl "
+            f"train`: a file of unknown origin loaded without that restriction could run "
+            f"code from it") from None
     except Exception as exc:  # torch raises several types for corrupt / foreign files
         raise ClassifierError(f"{path}: not a loadable weights file ({reason}; torch.load: "
-                              f"{exc})") from None
+                              f"{_first_sentence(exc)})") from None
+
+
+def _first_sentence(exc: Exception) -> str:
+    """The first sentence of an exception's text (torch appends paragraphs of advice)."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    end = text.find(". ")
+    return text if end < 0 else text[:end + 1]
 
 
 def _to_numpy(value: Any) -> np.ndarray:

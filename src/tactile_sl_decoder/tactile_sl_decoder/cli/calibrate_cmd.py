@@ -26,6 +26,8 @@ if TYPE_CHECKING:  # the modes import numpy themselves, so that --help stays fas
     import numpy as np
 
 PROG = "tactile-sl calibrate"
+CAMERA_FILES = ["left.yaml", "right.yaml"]
+"""What every calibrating mode writes into -o (written all or none, see safe_files)."""
 
 
 def _pattern(text: str) -> tuple[int, int]:
@@ -152,9 +154,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _pairs(args: argparse.Namespace) -> Any:
-    from tactile_sl_camera.calibration import iter_bag_pairs, iter_folder_pairs
+    from tactile_sl_camera.calibration import iter_bag_pairs, iter_folder_pairs, unpaired_images
 
     if args.folder:
+        alone = unpaired_images(args.folder)
+        if alone:       # "pairs used 4/4" alone would hide them
+            print(f"{PROG}: {len(alone)} image(s) without a partner, not used: "
+                  f"{', '.join(p.name for p in alone)}", file=sys.stderr)
         return iter_folder_pairs(args.folder)
     return iter_bag_pairs(args.bag, args.left_topic, args.right_topic, args.every)
 
@@ -173,8 +179,11 @@ def _target(args: argparse.Namespace) -> Any:
 
 
 def _run_board(args: argparse.Namespace) -> int:
-    """Checkerboard calibration (the original path, unchanged)."""
+    """Checkerboard calibration (the original path)."""
     from tactile_sl_camera.calibration import calibrate_stereo
+    from tactile_sl_camera.safe_files import check_outputs
+
+    check_outputs(args.output, CAMERA_FILES)       # before any work
 
     def on_pair(i: int, ok: bool) -> None:
         print(f"\rpair {i + 1}: {'board found' if ok else 'no board'}   ", end="",
@@ -192,12 +201,14 @@ def _run_board(args: argparse.Namespace) -> int:
 def _run_target(args: argparse.Namespace) -> int:
     """Printed-pattern calibration: decode every view, calibrate, report, write."""
     from tactile_sl_camera.calibration import CalibrationError
+    from tactile_sl_camera.safe_files import check_outputs
     from tactile_sl_decoder.calibrate import (
         CalibrationOptions,
         ViewDecoder,
         calibrate_pattern_stereo,
     )
 
+    check_outputs(args.output, CAMERA_FILES + ([] if args.no_coverage else ["coverage.png"]))
     target = _target(args)
     decoder = ViewDecoder(target)
     views, first = [], None
@@ -304,10 +315,17 @@ def _untouched(args: argparse.Namespace, bag: str) -> tuple[list[Any], Any, Any]
 
     if args.frames < 1:
         raise ValueError("--frames must be at least 1")
+    folder = pathlib.Path(args.calibration) if args.calibration else None
+    left_path = args.left_info or (folder / "left.yaml" if folder else None)
+    right_path = args.right_info or (folder / "right.yaml" if folder else None)
+    if (left_path is None) != (right_path is None):
+        raise ValueError("give both --left-info and --right-info (or --calibration DIR)")
+    files = left_path is not None and right_path is not None
     decoder = ViewDecoder(_target(args))
     views, infos = [], None
     try:
-        for frame in bag_frames(bag, ground_truth=False):
+        # the bag's camera_info topics are needed only without calibration files
+        for frame in bag_frames(bag, ground_truth=False, camera_info=not files):
             views.append(decoder.decode(to_gray(frame.left_image), to_gray(frame.right_image),
                                         f"{frame.stamp[0]}.{frame.stamp[1]:09d}"))
             if infos is None and frame.left_info is not None and frame.right_info is not None:
@@ -318,13 +336,8 @@ def _untouched(args: argparse.Namespace, bag: str) -> tuple[list[Any], Any, Any]
         decoder.close()
     if not views:
         raise ValueError(f"{bag}: no stereo frames")
-    folder = pathlib.Path(args.calibration) if args.calibration else None
-    left_path = args.left_info or (folder / "left.yaml" if folder else None)
-    right_path = args.right_info or (folder / "right.yaml" if folder else None)
     if left_path is not None and right_path is not None:
         return views, load_camera_info_yaml(left_path), load_camera_info_yaml(right_path)
-    if left_path is not None or right_path is not None:
-        raise ValueError("give both --left-info and --right-info (or --calibration DIR)")
     if infos is None:
         raise ValueError(f"{bag}: no CameraInfo recorded; pass --calibration DIR")
     return (views, calibration_from_msg(infos[0], "left CameraInfo"),
@@ -347,10 +360,11 @@ def _run_check(args: argparse.Namespace) -> int:
 def _run_refine(args: argparse.Namespace) -> int:
     """Refine the extrinsics in place; write the refined calibration atomically."""
     from tactile_sl_camera.camera_info import camera_info_yaml_text
-    from tactile_sl_decoder.calibrate import write_atomically
+    from tactile_sl_camera.safe_files import check_outputs, write_files
     from tactile_sl_decoder.calibrate.health import calibration_health, refine_extrinsics
     from tactile_sl_decoder.stereo.stereo import StereoRig
 
+    check_outputs(args.output, CAMERA_FILES)       # before any work
     views, left, right = _untouched(args, args.refine)
     target = _target(args)
     before = calibration_health([v.left for v in views], [v.right for v in views],
@@ -361,7 +375,7 @@ def _run_refine(args: argparse.Namespace) -> int:
     print(f"before:\n{before.summary()}\nafter refining the extrinsics (RMS "
           f"{result.rms_stereo:.3f} px, baseline {result.baseline * 1e3:.4f} mm):\n"
           f"{after.summary()}")
-    written = write_atomically(args.output, {
+    written = write_files(args.output, {
         "left.yaml": camera_info_yaml_text(result.left).encode(),
         "right.yaml": camera_info_yaml_text(result.right).encode()})
     print("wrote " + ", ".join(str(p) for p in written))
@@ -371,7 +385,7 @@ def _run_refine(args: argparse.Namespace) -> int:
 def _run_force(args: argparse.Namespace) -> int:
     """Fit the elastomer to a recording with known loads; write OUT/sensor.yaml."""
     from tactile_sl_camera.images import to_gray
-    from tactile_sl_decoder.calibrate import write_atomically
+    from tactile_sl_camera.safe_files import check_outputs, write_files
     from tactile_sl_decoder.frames import bag_frames
     from tactile_sl_decoder.glyphs import PipelineInputError
     from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
@@ -380,6 +394,7 @@ def _run_force(args: argparse.Namespace) -> int:
 
     if not args.bag:
         raise ValueError("--loads needs the recording: --bag BAG")
+    check_outputs(args.output, ["sensor.yaml"])      # before any work
     loads = load_loads_file(args.loads)
     start = load_sensor(args.sensor)
     pattern = PatternSpec.load(args.target or None)
@@ -415,7 +430,7 @@ def _run_force(args: argparse.Namespace) -> int:
     print(fit.report())
     comment = (f"written by tactile-sl calibrate --loads {args.loads} --bag {args.bag}\n"
                f"RMS force error {fit.rms_error * 100:.2f} % over {len(fit.loads)} loads")
-    written = write_atomically(args.output, {
+    written = write_files(args.output, {
         "sensor.yaml": sensor_yaml_text(fit.sensor, comment).encode()})
     print(f"wrote {written[0]}")
     return 0

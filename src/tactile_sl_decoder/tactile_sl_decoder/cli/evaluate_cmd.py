@@ -47,6 +47,34 @@ def register(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
+class SkippedFrames:
+    """Frames left out because their input is unusable: said once each on stderr, counted.
+
+    Every section evaluates the same frames, so a frame is reported by the first section
+    that meets it; ``evaluated`` counts the frames the symbol section could use.
+    """
+
+    def __init__(self, stream: Any = None) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.frames: dict[tuple[str, int], str] = {}
+        self.evaluated = 0
+
+    def callback(self, bag: Path) -> Callable[[int, str], None]:
+        """``on_skip`` for the evaluations of one bag."""
+        def skip(stamp_ns: int, why: str) -> None:
+            key = (str(bag), int(stamp_ns))
+            if key not in self.frames:
+                self.frames[key] = why
+                self.stream.write(f"\nevaluate: {Path(bag).name}: frame "
+                                  f"{stamp_ns // 10**9}.{stamp_ns % 10**9:09d} skipped: {why}\n")
+        return skip
+
+
+def _skips(args: argparse.Namespace, bag: Path) -> Callable[[int, str], None] | None:
+    skipped = getattr(args, "skipped", None)
+    return skipped.callback(bag) if skipped is not None else None
+
+
 def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
     """(values array, primitive names, where they came from) for labelling the truth."""
     from tactile_sl_decoder.pattern import load_default_pattern, load_pattern
@@ -94,13 +122,16 @@ def symbol_sections(args: argparse.Namespace, bags: list[Path]) -> str:
             sys.stderr.flush()
         try:
             rows = evaluate_symbols_bag(bag, values, clf, namespace=args.namespace,
-                                        progress=bar, max_frames=args.max_frames)
+                                        progress=bar, max_frames=args.max_frames,
+                                        on_skip=_skips(args, bag))
         except BagError as exc:
             sys.stderr.write("\n")
             raise SystemExit(f"evaluate: {exc}") from None
         sys.stderr.write("\n")
+        if getattr(args, "skipped", None) is not None:
+            args.skipped.evaluated += len({r.frame for r in rows})
         if not rows:
-            out.append(f"{bag.name}: no frame with ground truth\n")
+            out.append(f"{bag.name}: no frame with ground truth could be evaluated\n")
             continue
         all_rows += rows
         totals.append(aggregate(rows))
@@ -163,7 +194,8 @@ def e2e_section(args: argparse.Namespace, bags: list[Path]) -> str:
     try:
         for bag in bags:
             frames, summary = evaluate_bag(bag, pipe, namespace, progress=sys.stderr,
-                                           max_frames=int(getattr(args, "max_frames", 0) or 0))
+                                           max_frames=int(getattr(args, "max_frames", 0) or 0),
+                                           on_skip=_skips(args, bag))
             per_bag.append(summary)
             per_frame += [(summary.name, f) for f in frames]
     finally:
@@ -184,8 +216,10 @@ def e2e_section(args: argparse.Namespace, bags: list[Path]) -> str:
     format_table(per_bag, file=out)
     json_path = getattr(args, "json", None)
     if json_path:
+        from tactile_sl_camera.safe_files import write_text
+
         target = Path(json_path).with_suffix(".e2e.json")
-        target.write_text(json.dumps({
+        write_text(target, json.dumps({
             "bags": [b.summary() for b in per_bag],
             "frames": [dict(bag=name, **f.summary()) for name, f in per_frame]}, indent=1))
         print(f"(end-to-end figures also in {target})", file=out)
@@ -236,7 +270,8 @@ def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
             for bag, (sensor, where) in zip(touch_bags, sensors):
                 frames = evaluate_touch_bag(
                     bag, pipe, sensor, int(getattr(args, "reference_frames", 1) or 1), namespace,
-                    progress=sys.stderr, max_frames=int(getattr(args, "max_frames", 0) or 0))
+                    progress=sys.stderr, max_frames=int(getattr(args, "max_frames", 0) or 0),
+                    on_skip=_skips(args, bag))
                 per_bag.append((Path(bag).stem, f"{sensor_text(sensor)} ({where})", frames))
         finally:
             pipe.close()
@@ -285,6 +320,15 @@ def run(args: argparse.Namespace) -> int:
         except OutputError as exc:
             print(f"evaluate: {exc}", file=sys.stderr)
             return 2
+    args.skipped = SkippedFrames()
     for section in SECTIONS:
         print(section(args, list(args.bags)))
+    skipped = len(args.skipped.frames)
+    if skipped and not args.skipped.evaluated:
+        print(f"evaluate: all {skipped} frame(s) with ground truth were skipped (unusable "
+              "input, see above): nothing was evaluated", file=sys.stderr)
+        return 1
+    if skipped:
+        print(f"evaluate: {skipped} frame(s) skipped (unusable input, see above); the figures "
+              "are of the other frames", file=sys.stderr)
     return 0

@@ -51,13 +51,13 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Replay a bag; exit status 0 on success, 1 on bad input files."""
-    from tactile_sl_camera.bag_io import BagError, BagReader, BagWriter
+    from tactile_sl_camera.bag_io import BagError, BagWriter
     from tactile_sl_camera.clouds import cloud_fields
     from tactile_sl_camera.images import ImageFormatError, to_gray
     from tactile_sl_camera.safe_files import OutputError, check_output, same_file
     from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
     from tactile_sl_decoder.decode.codewords import PatternError
-    from tactile_sl_decoder.frames import bag_frames, bag_topics, count_bag_frames
+    from tactile_sl_decoder.frames import bag_frames, bag_topics
     from tactile_sl_decoder.glyphs import PipelineInputError
     from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline
     from tactile_sl_decoder.tooling.progress import progress_bar
@@ -85,15 +85,7 @@ def run(args: argparse.Namespace) -> int:
             touch = TouchStage(sensor, pattern.array.shape, pattern.pitch_m,
                                bool(args.mirrored),
                                TouchParams(reference_frames=args.reference_frames))
-        reader = BagReader(args.input)
-        topics = bag_topics(args.namespace)
-        reader.require_topics([topics[k] for k in ("left_image", "right_image", "left_info",
-                                                  "right_info")])
-        reader.verify()
-        total = count_bag_frames(args.input, args.namespace)
-        if total == 0:
-            raise BagError(f"{reader.path}: no stereo frames (0 messages on "
-                           f"{topics['left_image']}); nothing to replay")
+        total = _count_input_frames(args, touch is not None)
     except (BagError, PatternError, OSError, ValueError) as exc:
         if pipeline is not None:
             pipeline.close()
@@ -131,8 +123,12 @@ def run(args: argparse.Namespace) -> int:
                 writer.write(topic, "sensor_msgs/msg/PointCloud2", msg, frame.stamp_ns)
                 written += 1
                 touch_written += _write_touch(writer, touch, result, frame, prefix)
-    except (BagError, OSError) as exc:
-        print(f"\ntactile-sl replay: {exc}; {out_path} not written", file=sys.stderr)
+            _check_produced(written, skipped, empty, touch_written,
+                            args.reference_frames if touch is not None else 0)
+    except (BagError, OSError, NothingProduced) as exc:
+        if show:
+            sys.stderr.write("\n")
+        print(f"tactile-sl replay: {exc}; {out_path} not written", file=sys.stderr)
         return 1
     finally:
         pipeline.close()
@@ -147,12 +143,59 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _count_input_frames(args: argparse.Namespace, touch: bool) -> int:
+    """Check the input bag before any output exists; its number of stereo frames.
+
+    Raises BagError (unreadable, topics missing, no frames) or ValueError (the touch
+    reference would take every frame: no touch output could follow).
+    """
+    from tactile_sl_camera.bag_io import BagError, BagReader
+    from tactile_sl_decoder.frames import bag_topics, count_bag_frames
+
+    reader = BagReader(args.input)
+    topics = bag_topics(args.namespace)
+    reader.require_topics([topics[k] for k in ("left_image", "right_image", "left_info",
+                                              "right_info")])
+    reader.verify()
+    total = count_bag_frames(args.input, args.namespace)
+    if total == 0:
+        raise BagError(f"{reader.path}: no stereo frames (0 messages on "
+                       f"{topics['left_image']}); nothing to replay")
+    if touch and args.reference_frames >= total:
+        raise ValueError(f"--reference-frames {args.reference_frames}: {reader.path} has "
+                         f"{total} stereo frame(s), so no frame would follow the reference "
+                         f"and no touch output would be written (take fewer reference "
+                         f"frames, or --no-touch for the points alone)")
+    return total
+
+
+class NothingProduced(Exception):
+    """The run produced none of what it was asked for: it fails, and no bag is written."""
+
+
+def _check_produced(written: int, skipped: int, empty: int, touch_written: int,
+                    reference_frames: int) -> None:
+    """Raise NothingProduced when no cloud, or no touch output when they were asked for.
+
+    ``reference_frames`` is 0 without touch outputs (``--no-touch``).
+    """
+    frames = written + skipped + empty
+    if written == 0:
+        raise NothingProduced(f"no point cloud from any of the {frames} stereo frame(s) "
+                              f"({skipped} skipped for bad input, {empty} without points)")
+    if reference_frames and touch_written == 0:
+        raise NothingProduced(f"no touch output: no frame followed a usable reference "
+                              f"({written} frame(s) with points, the reference takes "
+                              f"{reference_frames}); take fewer --reference-frames, or "
+                              f"--no-touch for the points alone")
+
+
 def _write_touch(writer: Any, touch: Any, result: Any, frame: Any, prefix: str) -> int:
     """Touch outputs of one frame into the bag (1 if written, 0 while building the reference)."""
     if touch is None:
         return 0
     from tactile_sl_decoder.touch.messages import pose_fields, touch_messages
-    from tactile_sl_decoder.touch.reference import ReferenceError
+    from tactile_sl_decoder.touch.reference import ReferenceError, residual_warning
 
     had_reference = touch.ready
     try:
@@ -167,6 +210,10 @@ def _write_touch(writer: Any, touch: Any, result: Any, frame: Any, prefix: str) 
             pose = pose_fields(touch.reference.pose, frame.stamp, result.frame_id)
             writer.write(f"{prefix}/pad_pose", "geometry_msgs/msg/PoseStamped", pose,
                          frame.stamp_ns)
+            warning = residual_warning(touch.reference.pose.residual_rms)
+            if warning is not None:
+                print(f"tactile-sl replay: WARNING: reference at frame {frame.stamp[0]}."
+                      f"{frame.stamp[1]:09d}: {warning}", file=sys.stderr)
         return 0
     for name, schema, fields in touch_messages(outputs, frame.stamp, touch.sensor.pad_frame):
         writer.write(f"{prefix}/{name}", schema, fields, frame.stamp_ns)

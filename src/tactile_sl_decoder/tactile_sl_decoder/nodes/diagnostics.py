@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
+from tactile_sl_decoder.touch.reference import RESIDUAL_WARN_M, residual_warning
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
@@ -55,7 +56,7 @@ class DiagnosticLimits:
     """Share of the points whose cell one image got from the other camera (that camera
     found the glyph but could not read it, or did not find it) above which: WARN naming the
     camera (a dirty lens, a dark corner, a shadow on one side)."""
-    reference_residual_warn_m: float = 2e-5
+    reference_residual_warn_m: float = RESIDUAL_WARN_M
     """RMS residual of the pad-frame fit of the touch reference above which: WARN, metres
     (the pad was touched or bent when the reference was taken)."""
     calibration_error_factor: float = 3.0
@@ -217,13 +218,13 @@ class DecoderDiagnostics:
             return
         values.update(cells=_fmt(cells), residual_rms_um=_fmt(residual_rms_m * 1e6),
                       residual_max_um=_fmt(residual_max_m * 1e6))
-        text = f"reference of {cells} cells, pad fit residual {residual_rms_m * 1e6:.1f} um RMS"
-        if not residual_rms_m <= self.limits.reference_residual_warn_m:
+        warning = residual_warning(residual_rms_m, self.limits.reference_residual_warn_m)
+        if warning is not None:
             self.touch = Status("touch reference", WARN,
-                                text + f" > {self.limits.reference_residual_warn_m * 1e6:g} um:"
-                                " was the pad touched or bent? call the tare service", values)
+                                f"reference of {cells} cells, {warning}", values)
         else:
-            self.touch = Status("touch reference", OK, text, values)
+            self.touch = Status("touch reference", OK, f"reference of {cells} cells, pad fit "
+                                f"residual {residual_rms_m * 1e6:.1f} um RMS", values)
 
     # ------------------------------------------------------------ judgement
 

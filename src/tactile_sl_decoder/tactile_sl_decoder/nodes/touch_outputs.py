@@ -32,7 +32,7 @@ from tactile_sl_decoder.touch.messages import (
     slip_markers,
     wrench_fields,
 )
-from tactile_sl_decoder.touch.reference import ReferenceError
+from tactile_sl_decoder.touch.reference import ReferenceError, residual_warning
 from tactile_sl_decoder.touch.sensor import load_sensor
 from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
 
@@ -249,8 +249,12 @@ class TouchOutputs:
         response.success, response.message = ok, text
         self.tares += int(ok)
         self.last_tare = f"{'accepted' if ok else 'refused'}: {text}"
-        log = self.node.get_logger()
-        (log.info if ok else log.warning)(f"tare {text}")
+        # one call site per severity: rclpy refuses a severity change at the same call site
+        # (a ValueError in this callback, which ended the node without a reply)
+        if ok:
+            self.node.get_logger().info(f"tare {text}")
+        else:
+            self.node.get_logger().warning(f"tare {text}")
         self.announced_waiting = False
         return response
 
@@ -339,7 +343,11 @@ class TouchOutputs:
             t.transform.rotation.x, t.transform.rotation.y = o["x"], o["y"]
             t.transform.rotation.z, t.transform.rotation.w = o["z"], o["w"]
             self.tf.sendTransform(t)
-        self.node.get_logger().info(
-            f"touch: reference of {len(ref.cells)} cells from {ref.frames} frame(s); pad "
-            f"frame fit residual {ref.pose.residual_rms * 1e6:.1f} um RMS "
-            f"({ref.pose.residual_max * 1e6:.1f} um max)")
+        warning = residual_warning(ref.pose.residual_rms)
+        head = f"touch: reference of {len(ref.cells)} cells from {ref.frames} frame(s); "
+        if warning is not None:     # loudly: every later force is off (diagnostics: WARN)
+            self.node.get_logger().warning(head + warning)
+        else:
+            self.node.get_logger().info(
+                head + f"pad frame fit residual {ref.pose.residual_rms * 1e6:.1f} um RMS "
+                f"({ref.pose.residual_max * 1e6:.1f} um max)")

@@ -13,12 +13,14 @@ from typing import Any, Callable, TextIO
 
 import numpy as np
 
+from tactile_sl_decoder.glyphs import PipelineInputError
 from tactile_sl_decoder.tooling.e2e_metrics import (
     BagMetrics,
     FrameMetrics,
     aggregate,
     frame_metrics,
 )
+from tactile_sl_decoder.tooling.evaluation import FRAME_INPUT_ERRORS, SkipCallback
 from tactile_sl_decoder.tooling.progress import progress_bar
 from tactile_sl_decoder.tooling.touch_metrics import (
     NAN,
@@ -48,14 +50,16 @@ def flip_labels_hook(rate: float, symbols: int, seed: int = 0) -> Callable[[Any,
 
 def evaluate_bag(path: str | Path, pipeline: Any, namespace: str = "/tactile",
                  match_tol_m: float | None = None, label_hook: Callable | None = None,
-                 progress: TextIO | None = None, max_frames: int = 0
+                 progress: TextIO | None = None, max_frames: int = 0,
+                 on_skip: SkipCallback | None = None
                  ) -> tuple[list[FrameMetrics], BagMetrics]:
     """Run the pipeline over a bag with ground truth; per-frame and per-bag figures.
 
     ``match_tol_m`` defaults to half the pattern pitch (or 0.25 mm if the pitch is unknown).
-    Frames without ground truth are skipped.
+    Frames without ground truth are skipped; so are frames whose input is unusable
+    (:data:`~tactile_sl_decoder.tooling.evaluation.FRAME_INPUT_ERRORS`), each passed to
+    ``on_skip(stamp_ns, why)`` (without it, the error is raised).
     """
-    from tactile_sl_camera.images import to_gray
     from tactile_sl_decoder.frames import bag_frames, count_bag_frames
 
     pitch = float(getattr(pipeline.pattern, "pitch_m", 0.0) or 0.0)
@@ -70,8 +74,9 @@ def evaluate_bag(path: str | Path, pipeline: Any, namespace: str = "/tactile",
             progress_bar(progress, i + 1, total, Path(path).name)
         if frame.ground_truth is None:
             continue
-        result = pipeline.process(to_gray(frame.left_image), to_gray(frame.right_image),
-                                  frame.left_info, frame.right_info, label_hook=label_hook)
+        result = _process(pipeline, frame, on_skip, label_hook=label_hook)
+        if result is None:
+            continue
         fm = frame_metrics(result.points, frame.ground_truth, tol, frame.stamp_ns)
         fm.timings_ms = dict(result.timings_ms)
         frames.append(fm)
@@ -82,16 +87,16 @@ def evaluate_bag(path: str | Path, pipeline: Any, namespace: str = "/tactile",
 
 def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_frames: int = 1,
                        namespace: str = "/tactile", progress: TextIO | None = None,
-                       max_frames: int = 0, untouched: bool = False
-                       ) -> list[TouchFrameMetrics]:
+                       max_frames: int = 0, untouched: bool = False,
+                       on_skip: SkipCallback | None = None) -> list[TouchFrameMetrics]:
     """Pipeline + touch stage over a bag (as ``tactile-sl replay``), each frame decoded once.
 
     Frames used for the reference give no figures.  ``untouched``: the bag has no touch
     ground truth and the pad is at rest throughout (a control: zero truth).
     Timings per frame: ``pipeline`` (the pipeline's total), ``touch`` (the stage's) and
-    ``slip`` (the slip estimate's part of it).
+    ``slip`` (the slip estimate's part of it).  A frame with unusable input goes to
+    ``on_skip`` as in :func:`evaluate_bag`.
     """
-    from tactile_sl_camera.images import to_gray
     from tactile_sl_decoder.frames import bag_frames, count_bag_frames
     from tactile_sl_decoder.touch.reference import ReferenceError
     from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
@@ -113,8 +118,9 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
         truth = truths.get(frame.stamp_ns)
         if truth is None and not untouched:
             continue
-        result = pipeline.process(to_gray(frame.left_image), to_gray(frame.right_image),
-                                  frame.left_info, frame.right_info)
+        result = _process(pipeline, frame, on_skip)
+        if result is None:
+            continue
         was_ready = stage.ready
         try:
             touch = stage.update(result.points)
@@ -132,3 +138,20 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
     if progress is not None:
         progress.write("\n")
     return out
+
+
+def _process(pipeline: Any, frame: Any, on_skip: SkipCallback | None,
+             label_hook: Callable | None = None) -> Any:
+    """The pipeline's result for a bag frame, or None (after ``on_skip``) if its input is bad."""
+    from tactile_sl_camera.images import to_gray
+
+    try:
+        if frame.left_info is None or frame.right_info is None:
+            raise PipelineInputError("no camera_info for this frame")
+        return pipeline.process(to_gray(frame.left_image), to_gray(frame.right_image),
+                                frame.left_info, frame.right_info, label_hook=label_hook)
+    except FRAME_INPUT_ERRORS as exc:
+        if on_skip is None:
+            raise
+        on_skip(frame.stamp_ns, str(exc))
+        return None

@@ -29,8 +29,11 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from tactile_sl_camera.camera_info import CameraInfoError
+from tactile_sl_camera.images import ImageFormatError
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.extract.extraction import ExtractionParams, extract_symbols
+from tactile_sl_decoder.glyphs import PipelineInputError
 
 
 @dataclass
@@ -139,14 +142,48 @@ def score_image(u: np.ndarray, v: np.ndarray, spacing: float, truth_px: np.ndarr
     out.unknown = int((p[valid] == LABEL_UNKNOWN).sum())
 
 
+SkipCallback = Callable[[int, str], None]
+"""``on_skip(stamp_ns, why)``: a frame left out of an evaluation because its input is bad."""
+
+
+FRAME_INPUT_ERRORS: tuple[type[Exception], ...] = (ImageFormatError, CameraInfoError,
+                                                    PipelineInputError)
+"""What a frame's unusable input raises (image encoding or size, CameraInfo): the frame is
+skipped with a warning, as ``tactile-sl replay`` does."""
+
+
+def frame_input(frame: Any) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray]]:
+    """(left, right calibration, (left, right grey image)) of a bag frame, checked.
+
+    Raises one of :data:`FRAME_INPUT_ERRORS` for an image the project cannot read (mono16,
+    yuv422, ...), one whose size is not its CameraInfo's, or a missing or bad CameraInfo.
+    """
+    from tactile_sl_camera.camera_info import calibration_from_msg
+    from tactile_sl_camera.images import to_gray
+    from tactile_sl_decoder.pipeline import check_image
+
+    if frame.left_info is None or frame.right_info is None:
+        raise CameraInfoError("no camera_info for this frame")
+    left = calibration_from_msg(frame.left_info, "left CameraInfo")
+    right = calibration_from_msg(frame.right_info, "right CameraInfo")
+    grays = (to_gray(frame.left_image), to_gray(frame.right_image))
+    check_image(grays[0], left, "left")
+    check_image(grays[1], right, "right")
+    return left, right, grays
+
+
 def evaluate_symbols_bag(path: str | Path, values: np.ndarray, classifier: Any,
                          params: ExtractionParams | None = None, namespace: str = "/tactile",
                          progress: Callable[[int, int], None] | None = None,
-                         max_frames: int = 0) -> list[ImageSymbolMetrics]:
-    """Per-image extraction and classification figures of every frame with ground truth."""
-    from tactile_sl_camera.camera_info import calibration_from_msg
+                         max_frames: int = 0, on_skip: SkipCallback | None = None
+                         ) -> list[ImageSymbolMetrics]:
+    """Per-image extraction and classification figures of every frame with ground truth.
+
+    A frame whose images or CameraInfo cannot be used (encoding, size against the
+    CameraInfo, calibration) is passed to ``on_skip(stamp_ns, why)`` and left out; without
+    ``on_skip`` the error is raised (see :data:`FRAME_INPUT_ERRORS`).
+    """
     from tactile_sl_camera.clouds import cloud_to_arrays
-    from tactile_sl_camera.images import to_gray
     from tactile_sl_decoder.frames import bag_frames, count_bag_frames
 
     scene = Path(path).stem
@@ -160,18 +197,21 @@ def evaluate_symbols_bag(path: str | Path, values: np.ndarray, classifier: Any,
             progress(i + 1, total)
         if frame.ground_truth is None:
             continue
+        try:
+            left, right, grays = frame_input(frame)
+        except FRAME_INPUT_ERRORS as exc:
+            if on_skip is None:
+                raise
+            on_skip(frame.stamp_ns, str(exc))
+            continue
         truth = cloud_to_arrays(frame.ground_truth)
-        left = calibration_from_msg(frame.left_info, "left CameraInfo")
-        right = calibration_from_msg(frame.right_info, "right CameraInfo")
         xyz = np.column_stack((truth["x"], truth["y"], truth["z"]))
         px = project_truth(xyz, left, right)
         r, c = truth["row"].astype(np.int64), truth["col"].astype(np.int64)
         inside = (r >= 0) & (r < values.shape[0]) & (c >= 0) & (c < values.shape[1])
         labels_true = np.full(len(r), LABEL_UNKNOWN, np.uint8)
         labels_true[inside] = values[r[inside], c[inside]]
-        for camera, msg, tpx in (("left", frame.left_image, px[0]),
-                                 ("right", frame.right_image, px[1])):
-            gray = to_gray(msg)
+        for camera, gray, tpx in (("left", grays[0], px[0]), ("right", grays[1], px[1])):
             m = ImageSymbolMetrics(scene, i, camera)
             start = time.perf_counter()
             det = extract_symbols(gray, params)

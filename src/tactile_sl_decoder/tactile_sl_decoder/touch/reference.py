@@ -21,6 +21,25 @@ class ReferenceError(ValueError):
 
 
 MIN_REFERENCE_CELLS = 16
+RESIDUAL_WARN_M = 2e-5
+"""RMS residual (m) of the pad-frame fit above which a reference is suspect.  A flat,
+untouched pad seen through a correct calibration fits to 2 um on the bundled bags; a
+reference taken while pressed fits to 47 um at 0.5 N and 190 um at 2 N on the half-space
+(every later wrench is then off by that load).  A light press (0.05 N: 4.9 um) stays below
+it: the residual cannot tell it from noise."""
+
+
+def residual_warning(residual_rms: float, limit: float = RESIDUAL_WARN_M) -> str | None:
+    """The warning for a reference whose fit residual is ``residual_rms`` (m), or None.
+
+    None while the residual is at most ``limit``; a NaN residual is suspect too.
+    """
+    if residual_rms <= limit:
+        return None
+    return (f"pad frame fit residual {residual_rms * 1e6:.1f} um RMS > {limit * 1e6:g} um: "
+            f"the pad was touched when the reference was taken, or the calibration or the "
+            f"pattern's pitch is off; forces and contact will be wrong (release the pad and "
+            f"call tare, or check the calibration)")
 
 
 @dataclass(frozen=True)

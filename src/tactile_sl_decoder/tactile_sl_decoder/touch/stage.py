@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_sl_camera.elasticity import check_layer_resolved
 from tactile_sl_decoder.touch.contact import (
     ContactParams,
     ContactState,
@@ -138,6 +139,10 @@ class TouchStage:
                  background: bool = False) -> None:
         if pitch <= 0:
             raise ValueError(f"the pattern's pitch must be > 0 for touch outputs, got {pitch}")
+        try:    # at load, not when the first reference is prepared
+            check_layer_resolved(sensor.elastomer, pitch)
+        except ValueError as exc:
+            raise ValueError(f"{sensor.source}: {exc}") from None
         self.sensor = sensor
         self.shape = (int(shape[0]), int(shape[1]))
         self.pitch = float(pitch)
@@ -150,7 +155,7 @@ class TouchStage:
         self.slip = SlipEstimator(sensor.elastomer, self.pitch, self.params.slip)
         self.reference: Reference | None = None
         self.solver: TractionSolver | None = None
-        self.contact_params = self.params.contact
+        self._area_fraction = 0.0        # the solver's choice, set with each reference
         self._builder = ReferenceBuilder(self.params.reference_frames, self.shape)
         self.background = bool(background)
         self._preparing: _Preparation | None = None
@@ -273,8 +278,7 @@ class TouchStage:
     def _set_reference(self, prepared: tuple[Any, ...]) -> None:
         cells, rest, pose, frames, nominal, solver = prepared
         self.solver = solver
-        fraction = self.params.contact.area_fraction or self.solver.area_fraction
-        self.contact_params = dataclasses.replace(self.params.contact, area_fraction=fraction)
+        self._area_fraction = solver.area_fraction
         self._index[:] = -1
         self._index[cells] = np.arange(len(cells))
         self._rest_table = nominal_positions(*np.divmod(np.arange(len(self._index)),
@@ -282,6 +286,18 @@ class TouchStage:
                                              self.shape, self.pitch, self.mirrored)
         self._rest_table[cells] = rest
         self.reference = Reference(cells, rest, pose, frames, nominal)
+
+    @property
+    def contact_params(self) -> ContactParams:
+        """The contact thresholds in force: ``params.contact`` as it is now.
+
+        A live change applies from the next frame; the area fraction is the reference's
+        solver's unless ``params.contact`` sets one.
+        """
+        contact = self.params.contact
+        if contact.area_fraction or not self._area_fraction:
+            return contact
+        return dataclasses.replace(contact, area_fraction=self._area_fraction)
 
     # ------------------------------------------------------------------ frames
 
