@@ -18,7 +18,8 @@ import numba
 _KERNELS: list[Any] = []
 
 KERNEL_MODULES = ("tactile_sl_decoder.neighbours", "tactile_sl_decoder.extract.spacing",
-                  "tactile_sl_decoder.decode.links", "tactile_sl_decoder.stereo.outliers")
+                  "tactile_sl_decoder.decode.links", "tactile_sl_decoder.decode.votes",
+                  "tactile_sl_decoder.stereo.outliers")
 """The modules that define kernels: importing them compiles (or loads) every kernel."""
 
 

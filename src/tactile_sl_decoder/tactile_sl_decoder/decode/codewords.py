@@ -34,6 +34,7 @@ from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.decode.grid import NEIGHBOUR_SLOTS, OFFSETS, Grid, window_indices
+from tactile_sl_decoder.decode.votes import group_votes
 
 DIRECT_TABLE_MAX = 1 << 22   # code spaces up to this size are looked up by direct address
 
@@ -267,27 +268,6 @@ def _links(nbr: np.ndarray) -> np.ndarray:
     return np.where(j >= 0, j, len(nbr))
 
 
-def _group_votes(glyph: np.ndarray, cell: np.ndarray, ncells: int
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Per glyph with votes: (glyph, winning cell, winning count, total count)."""
-    if len(glyph) == 0:
-        z = np.zeros(0, dtype=np.int64)
-        return z, z, z, z
-    key = glyph.astype(np.int64) * ncells + cell
-    uk, cnt = np.unique(key, return_counts=True)
-    g, c = uk // ncells, uk % ncells
-    order = np.lexsort((-cnt, g))                 # by glyph, most votes first
-    g, c, cnt = g[order], c[order], cnt[order]
-    first = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-    total = np.add.reduceat(cnt, first)
-    # A tie for the top cell is not a winner.
-    second = np.zeros_like(total)
-    has2 = np.r_[first[1:], len(g)] - first > 1
-    second[has2] = cnt[first[has2] + 1]
-    top = np.where(cnt[first] > second, cnt[first], 0)
-    return g[first], c[first], top, total
-
-
 class CodewordDecoder:
     """Glyph labels + lattice -> pattern cells, with voting and consistency checks."""
 
@@ -358,7 +338,8 @@ class CodewordDecoder:
         anchor = lay.encode(groups[ok], ar, ac)
         vcell = anchor[:, None] + (pos_r * lay.W + pos_c)[None, :]   # internal numbering
         m = g >= 0
-        gg, cc, top, total = _group_votes(g[m], vcell[m], lay.size)
+        gg, cc, top, total = group_votes(np.ascontiguousarray(g[m], dtype=np.int64),
+                                         np.ascontiguousarray(vcell[m], dtype=np.int64))
         accept = (top >= p.min_votes) & (top >= p.vote_ratio * total)
         cell = np.full(n, -1, dtype=np.int64)
         cell[gg[accept]] = cc[accept]
