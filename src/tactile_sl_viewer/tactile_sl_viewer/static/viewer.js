@@ -306,7 +306,7 @@
     }
     const [fx, fy, fz] = w.force, [mx, my, mz] = w.torque;
     const normal = -fz, shear = Math.hypot(fx, fy);
-    const scale = niceCeil(Math.max(Math.abs(normal), shear, 0.05));
+    const shearScale = niceCeil(Math.max(shear, 0.02)), normalScale = niceCeil(Math.max(Math.abs(normal), 0.05));
     // scale rings and axes (pad frame, x right, y up)
     ctx.strokeStyle = "#333";
     ctx.lineWidth = 1;
@@ -316,11 +316,12 @@
     ctx.stroke();
     ctx.fillStyle = "#999";
     ctx.font = "12px sans-serif";
-    ctx.fillText(`ring: ${scale} N`, 8, H - 8);
+    ctx.fillText(`shear (orange), ring ${shearScale} N`, 8, H - 24);
+    ctx.fillText("twist Mz (blue), circle 10 mN·m", 8, H - 8);
     ctx.fillText("x", cx + R + 4, cy + 4);
     ctx.fillText("y", cx - 3, cy - R - 4);
     // shear force: arrow from the centre
-    arrow(ctx, cx, cy, cx + R * fx / scale, cy - R * fy / scale, "rgb(255,170,40)", 3);
+    arrow(ctx, cx, cy, cx + R * fx / shearScale, cy - R * fy / shearScale, "rgb(255,170,40)", 3);
     // twist Mz: an arc, its sweep in proportion (full circle = 10 mN m)
     if (Math.abs(mz) > 1e-6) {
       const sweep = Math.max(-1.9 * Math.PI, Math.min(1.9 * Math.PI, (mz / 0.01) * 2 * Math.PI));
@@ -338,10 +339,11 @@
     ctx.strokeStyle = "#555";
     ctx.strokeRect(bx, by - bh, 14, 2 * bh);
     ctx.fillStyle = normal >= 0 ? "rgb(60,200,120)" : "rgb(230,80,80)";
-    const len = bh * Math.max(-1, Math.min(1, normal / scale));
+    const len = bh * Math.max(-1, Math.min(1, normal / normalScale));
     ctx.fillRect(bx, len >= 0 ? by - len : by, 14, Math.abs(len));
     ctx.fillStyle = "#999";
     ctx.fillText("Fn", bx - 2, by + bh + 14);
+    ctx.fillText(`${normalScale} N`, bx - 14, by - bh - 6);
     $("normal-force").textContent = normal.toFixed(3);
     $("shear-force").textContent = `${fx.toFixed(3)}, ${fy.toFixed(3)}`;
     $("moment").textContent = `${(1e3 * mx).toFixed(2)}, ${(1e3 * my).toFixed(2)}, ${(1e3 * mz).toFixed(2)}`;
@@ -370,6 +372,7 @@
     ctx.fillStyle = "#111";
     ctx.fillRect(0, 0, canvas.width, canvas.height);
     const badge = $("slip-state");
+    canvas.hidden = !s;
     if (!s) {
       badge.textContent = state.hello && state.hello.slip ? "no slip message" : "not published";
       badge.className = "badge";
