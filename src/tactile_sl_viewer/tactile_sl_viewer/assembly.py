@@ -101,6 +101,13 @@ class FrameAssembler:
         for listener in self._listeners:
             listener()
 
+    def reset(self) -> None:
+        """Forget the frames held (a bag shows another one)."""
+        with self._lock:
+            self._frames.clear()
+            self._pending_images.clear()
+            self._last_arrival.clear()
+
     def add_diagnostics(self, msg: Any) -> None:
         """The newest DiagnosticArray (shown beside every frame)."""
         with self._lock:

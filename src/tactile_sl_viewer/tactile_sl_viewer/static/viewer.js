@@ -63,7 +63,11 @@
     state.hello = msg;
     $("source").textContent = msg.mode === "bag"
       ? `recorded bag ${msg.bag} (${msg.frames} frames)` : `live: ${msg.namespace}`;
-    if (msg.mode === "bag") setupBag(msg);
+    if (msg.mode === "bag") {
+      setupBag(msg);
+      setStatus(msg.decoded_here ? "recorded, decoded here" : "recorded", "ok");
+      for (const row of document.querySelectorAll(".live-only")) row.hidden = true;
+    }
     if (!msg.slip) $("slip-note").textContent =
       "This decoder has no slip output (tactile_sl_msgs/Slip is not built).";
     requestNext();
