@@ -7,7 +7,9 @@
 (() => {
   const $ = (id) => document.getElementById(id);
   const state = { ws: null, hello: null, mapKind: "pressure", shown: [], frames: 0,
-                  bagIndex: 0, playing: null };
+                  bagIndex: 0, playing: null, lastAsk: 0 };
+  // ?fps=N: ask for at most N frames a second (a slow computer, a metered link)
+  const maxFps = Number(new URLSearchParams(location.search).get("fps")) || 0;
   const CLASS_RGB = ["rgb(230,60,60)", "rgb(60,200,60)", "rgb(40,140,230)"];
   const UNKNOWN_RGB = "rgb(160,160,160)";
   const VIRIDIS = [[68, 1, 84], [72, 40, 120], [62, 74, 137], [49, 104, 142], [38, 130, 142],
@@ -98,7 +100,14 @@
     } catch (err) {
       showErrors([String(err)]);
     }
-    requestAnimationFrame(requestNext);       // the browser's pace
+    requestAnimationFrame(askWhenDue);        // the browser's pace
+  }
+
+  function askWhenDue() {
+    const wait = maxFps > 0 ? state.lastAsk + 1000 / maxFps - performance.now() : 0;
+    if (wait > 1) { setTimeout(askWhenDue, wait); return; }
+    state.lastAsk = performance.now();
+    requestNext();
   }
 
   // ------------------------------------------------------------------ one frame
@@ -146,9 +155,7 @@
       for (let i = 0; i < u.length; i++) {
         const c = label[i] < 3 ? label[i] : 3;
         if (c !== cls) continue;
-        const path = decoded[i] ? filled : ring;
-        path.moveTo(u[i] + 3, v[i]);
-        path.arc(u[i], v[i], 3, 0, 2 * Math.PI);
+        (decoded[i] ? filled : ring).rect(u[i] - 2.5, v[i] - 2.5, 5, 5);   // squares: cheap
       }
       ctx.fillStyle = colour;
       ctx.strokeStyle = colour;
@@ -180,9 +187,9 @@
     const bar = 56, margin = 18;
     const s = Math.min((W - bar - 2 * margin) / cols, (H - 2 * margin - 24) / rows);
     const x0 = margin, y0 = margin;
-    const off = document.createElement("canvas");
-    off.width = cols;
-    off.height = rows;
+    if (!state.off) state.off = document.createElement("canvas");
+    const off = state.off;
+    if (off.width !== cols || off.height !== rows) { off.width = cols; off.height = rows; }
     const img = off.getContext("2d").createImageData(cols, rows);
     const table = LUTS[m.kind];
     for (let i = 0; i < rows; i++) {
