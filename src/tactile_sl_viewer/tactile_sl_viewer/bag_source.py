@@ -82,7 +82,7 @@ class BagSource:
         log_time = self._log_time[stamp]
         with open(self.path, "rb") as f:
             for schema, _channel, message in make_reader(f).iter_messages(
-                    topics=[self.image_topic], start_time=log_time, ending_before=log_time + 1):
+                    topics=[self.image_topic], starting_at=log_time, ending_before=log_time + 1):
                 if schema is not None and \
                         header_stamp_of_cdr(message.data) == divmod(stamp, 1_000_000_000):
                     return self.reader.decoder(schema)(message.data)
