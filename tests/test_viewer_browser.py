@@ -102,9 +102,11 @@ def _watch(page, probe, domain: int, tmp_path, wrenches: dict[int, float]) -> di
             shown[stamp] = {**state, "map": picture[1], "in_contact": picture[2]}
             if state["normal"] != "–" and float(state["normal"]) > 1.5 \
                     and (shot is None or steady < time.monotonic() < steady + 60.0):
-                shot = tmp_path / "viewer.png"
-                page.screenshot(path=str(shot), full_page=True)
-                steady = steady + 60.0 if time.monotonic() > steady else steady
+                picture_file = tmp_path / f"viewer_{stamp}.png"
+                page.screenshot(path=str(picture_file), full_page=True)
+                if page.evaluate("document.body.dataset.stamp") == state["stamp"]:
+                    shot = picture_file              # still that pressed frame: keep it
+                    steady = steady + 60.0 if time.monotonic() > steady else steady
         probe.spin(1.0)                                   # the last wrenches
     assert shot is not None, f"no pressed frame was shown: {shown}"
     if screenshot:
