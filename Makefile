@@ -7,6 +7,7 @@ ENV := TACTILE_SL_NETWORK=loopback source env.sh &&
 
 help:
 	@echo "make demo   - replay the bundled bag through the pipeline and print what came out"
+	@echo "              (make demo VIEW=1: also the browser view, address printed)"
 	@echo "make test   - lint + the whole test suite (creates .venv and builds on first use)"
 	@echo "make unit   - the fast unit tests only (no node processes, nothing slow; < 1 min)"
 	@echo "make lint   - ruff and the type checker (mypy; what the pre-commit hooks run)"
@@ -41,7 +42,7 @@ test: setup
 	  rm -f "$$log" "$$log.rc"; [ $$rc -eq 0 ] && [ $$mrc -eq 0 ]; }
 
 demo: setup
-	@$(ENV) python tools/demo.py
+	@$(ENV) python tools/demo.py $(if $(VIEW),--view)
 
 bags: setup
 	@$(ENV) bash tools/make_bags.sh
@@ -60,6 +61,7 @@ bench: setup
 	@$(ENV) python tools/bench_calibration.py
 	@$(ENV) nice -n 10 python tools/bench_sweep.py --bound
 	@$(ENV) python tools/bench_touch.py
+	@$(ENV) python tools/bench_viewer.py
 
 clean:
 	rm -rf build install log

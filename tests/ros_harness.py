@@ -196,3 +196,35 @@ def stop(process: subprocess.Popen, timeout: float = 10.0) -> int:
             process.kill()
             process.wait()
     return process.returncode
+
+
+CHROMIUM = pathlib.Path(os.environ.get("TACTILE_SL_CHROMIUM", "/usr/bin/chromium"))
+"""The distribution's Chromium (tools/setup.sh installs it); playwright downloads no browser."""
+CHROMIUM_ARGS = [
+    "--no-sandbox",                       # as root; the page is our own, on loopback
+    "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-sync",
+    # no network here: without these Chromium keeps trying (and failing) to reach services
+    "--disable-background-networking", "--disable-component-update",
+]
+
+
+@contextlib.contextmanager
+def browser_page(profile_dir: pathlib.Path, width: int = 1560, height: int = 900
+                 ) -> Iterator[Any]:
+    """A page of headless Chromium (a fresh profile in ``profile_dir``), via playwright.
+
+    Raises (the test fails, never skips) when Chromium or playwright is missing.
+    """
+    from playwright.sync_api import sync_playwright
+
+    if not os.access(CHROMIUM, os.X_OK):
+        raise FileNotFoundError(f"{CHROMIUM} is not an executable: `make setup` as root "
+                                "installs Debian's chromium (apt-get install chromium)")
+    with sync_playwright() as playwright:
+        context = playwright.chromium.launch_persistent_context(
+            str(profile_dir), executable_path=str(CHROMIUM), headless=True,
+            args=CHROMIUM_ARGS, viewport={"width": width, "height": height})
+        try:
+            yield context.pages[0] if context.pages else context.new_page()
+        finally:
+            context.close()

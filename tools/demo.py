@@ -14,6 +14,10 @@ the throughput printed is what the graph sustains. This process listens to `poin
 (coverage, wrong cells, 3-D error; force, shear, centroid, area, depth, in_contact), and
 writes to out/demo/ a decoded-overlay picture, a picture of the point cloud, the pressure
 map with shear arrows and the depth map of the most loaded frame.
+
+With ``--view`` (``make demo VIEW=1``) the ``viewer`` node runs beside them and its address
+is printed; after the report the bag keeps playing in a loop at its recorded rate through a
+fresh decoder, for the page, until Ctrl-C (or ``--view-seconds``).
 """
 from __future__ import annotations
 
@@ -125,6 +129,13 @@ def main() -> int:
     parser.add_argument("--out", type=pathlib.Path, default=REPO / "out" / "demo")
     parser.add_argument("--domain-id", type=int,
                         default=int(os.environ.get("DEMO_DOMAIN_ID", 23)))
+    parser.add_argument("--view", action="store_true",
+                        help="also start the viewer (browser page) and keep the bag playing "
+                        "for it after the report")
+    parser.add_argument("--view-port", type=int, default=8080,
+                        help="port of the viewer's page (default 8080, on 127.0.0.1)")
+    parser.add_argument("--view-seconds", type=float, default=0.0,
+                        help="with --view: stop after this long (0 = at Ctrl-C)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     bag = args.bag.resolve()
@@ -139,6 +150,9 @@ def main() -> int:
           f"(ROS domain {args.domain_id}, DDS on loopback only)")
     print(f"sensor: {sensor_text(sensor)} ({sensor_from})")
 
+    viewer = start_viewer(args) if args.view else None
+    if args.view and viewer is None:
+        return 1
     listener = Listener(args.domain_id)
     decoder = start("tactile_sl_decoder", "decoder",
                     ["-r", "__ns:=/tactile", "-p", f"sensor_file:={sensor_file}"],
@@ -218,6 +232,55 @@ def main() -> int:
           f"cloud.png ({cloud.width} points, z {depth.min() * 1e3:.2f}..{depth.max() * 1e3:.2f} "
           "mm)")
     touch_pictures(listener, pattern, frames[0].stamp_ns, args.out, where)
+    if viewer is not None:
+        return serve_view(args, bag, sensor_file, viewer)
+    return 0
+
+
+_VIEWERS: list[subprocess.Popen] = []     # stopped however the demo ends
+
+
+def start_viewer(args: argparse.Namespace) -> tuple[subprocess.Popen, str] | None:
+    """The viewer node beside the demo, and its address (from its log)."""
+    log = args.out / "viewer.log"
+    proc = start("tactile_sl_viewer", "viewer",
+                 ["-r", "__ns:=/tactile", "-p", f"port:={args.view_port}"], args.domain_id, log)
+    _VIEWERS.append(proc)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and proc.poll() is None:
+        text = log.read_text(errors="replace") if log.exists() else ""
+        if "viewer: open " in text:
+            url = text.split("viewer: open ", 1)[1].split()[0]
+            print(f"viewer: open {url} in a browser on this computer")
+            return proc, url
+        time.sleep(0.1)
+    stop(proc)
+    print(f"demo: the viewer did not start; see {log}")
+    return None
+
+
+def serve_view(args: argparse.Namespace, bag: pathlib.Path, sensor_file: pathlib.Path,
+               viewer: tuple[subprocess.Popen, str]) -> int:
+    """Keep the bag playing (looped, recorded rate) through a fresh decoder for the page."""
+    proc, url = viewer
+    decoder = start("tactile_sl_decoder", "decoder",
+                    ["-r", "__ns:=/tactile", "-p", f"sensor_file:={sensor_file}"],
+                    args.domain_id, args.out / "decoder_view.log")
+    replay = start("tactile_sl_camera", "replay", [
+        "-r", "__ns:=/tactile", "-p", f"bag:={bag}", "-p", "loop:=true", "-p", "rate:=1.0",
+        "-p", "wait_for_subscribers:=1", "-p", "wait_for_subscribers_timeout:=60.0"],
+        args.domain_id, args.out / "replay_view.log")
+    how = f"for {args.view_seconds:g} s" if args.view_seconds > 0 else "until Ctrl-C"
+    print(f"\nviewer: {bag.name} plays in a loop at its recorded rate {how}: {url}")
+    end = time.monotonic() + args.view_seconds if args.view_seconds > 0 else float("inf")
+    try:
+        while time.monotonic() < end and all(p.poll() is None for p in (proc, decoder, replay)):
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        for p in (replay, decoder, proc):
+            stop(p)
     return 0
 
 
@@ -282,4 +345,8 @@ def touch_pictures(listener: Listener, pattern: PatternSpec, t0_ns: int, out: pa
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    finally:
+        for viewer_process in _VIEWERS:
+            stop(viewer_process)

@@ -22,6 +22,16 @@ command -v c++ >/dev/null 2>&1 || missing+=(g++)
 command -v make >/dev/null 2>&1 || missing+=(make)
 # tests/test_robot_network.py builds two network namespaces with `ip`.
 command -v ip >/dev/null 2>&1 || missing+=(iproute2)
+# The viewer's browser test drives the distribution's headless Chromium (playwright never
+# downloads a browser of its own here): installed as root; otherwise only that test needs it.
+if [ ! -x /usr/bin/chromium ]; then
+  if [ "$(id -u)" = 0 ]; then
+    missing+=(chromium)
+  else
+    echo "[setup] /usr/bin/chromium missing: the viewer's browser test needs it" \
+         "(sudo apt-get install -y chromium)" >&2
+  fi
+fi
 "$PY" -c 'import sysconfig, os, sys; sys.exit(not os.path.exists(os.path.join(sysconfig.get_paths()["include"], "Python.h")))' \
   || missing+=(python3-dev)
 "$PY" -c 'import ensurepip' >/dev/null 2>&1 || missing+=(python3-venv)
@@ -50,7 +60,8 @@ if [ "$want" != "$have" ]; then
   "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check --upgrade pip 'setuptools<80'
   # torch first and alone, pinned, so nothing else can resolve it to a CUDA build.
   "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check torch==2.13.0
-  "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -r "$REQ"
+  PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 \
+    "$VENV/bin/python" -m pip install --quiet --disable-pip-version-check -r "$REQ"
   echo "$want" > "$STAMP"
 else
   log "Python dependencies up to date"

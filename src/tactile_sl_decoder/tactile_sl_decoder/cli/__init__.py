@@ -22,6 +22,7 @@ SUBCOMMAND_MODULES: tuple[str, ...] = (
     "tactile_sl_decoder.cli.train_cmd",
     "tactile_sl_decoder.cli.evaluate_cmd",
     "tactile_sl_decoder.cli.replay_cmd",
+    "tactile_sl_viewer.view_cmd",        # the viewer package's (omitted when not installed)
 )
 
 

@@ -1,0 +1,1 @@
+"""tactile-sl viewer: the decoder's outputs live in a browser (aiohttp page + WebSocket)."""
