@@ -4,6 +4,7 @@
     python tools/bench_touch.py                  # the three touch bags + an untouched control
     python tools/bench_touch.py --repeat 5       # more frames for the timing figures
     python tools/bench_touch.py --no-slip        # without the slip scenes
+    python tools/bench_touch.py --no-shapes      # without the indenter shape scenes
 
 Runs the evaluation of ``tactile-sl evaluate`` (pipeline + touch stage, each frame decoded
 once, reference = the first frame) over bags/touch_halfspace.mcap and
@@ -11,6 +12,12 @@ bags/touch_calibration.mcap (elastic half-space) and bags/touch_layer.mcap (2 mm
 with E and nu of bags/touch_scenes.yaml, and over bags/no_contact.mcap as an untouched
 control (truth: no force, no contact, no displacement).  Prints the per-frame and per-bag
 table with the acceptance limits of issue 10 (figures, not pass/fail: the exit status is 0).
+
+Then the indenter shape scenes (bags/shape_scenes.yaml: a sphere, a small sphere, flat
+punches, a cylinder lying on the pad, a long rounded edge, two contacts and a 2 mm layer,
+each untouched then pressed lightly and firmly; rendered into a temporary folder first, a
+few seconds): per frame the true and estimated contact area and largest indentation, with
+the limits of issue 25 (area within 15 %, indentation within 10 um).
 
 Then the slip scenes (bags/slip_scenes.yaml: tangential loads ramped to gross slip at several
 friction coefficients, sizes, directions and normal loads, with and without image
@@ -38,7 +45,11 @@ from tactile_sl_camera.elasticity import Elastomer
 from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
 from tactile_sl_decoder.tooling.bag_runs import evaluate_touch_bag
 from tactile_sl_decoder.tooling.slip_metrics import format_slip_report, slip_frames
-from tactile_sl_decoder.tooling.touch_metrics import format_report, sensor_text
+from tactile_sl_decoder.tooling.touch_metrics import (
+    format_report,
+    format_shape_report,
+    sensor_text,
+)
 from tactile_sl_decoder.touch.sensor import SensorConfig
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -47,10 +58,11 @@ BAGS = REPO / "bags"
 TOUCH_BAGS = (("touch_halfspace", 0.0), ("touch_layer", 0.002), ("touch_calibration", 0.0))
 CONTROL_BAG = "no_contact"
 SLIP_SCENES = BAGS / "slip_scenes.yaml"
+SHAPE_SCENES = BAGS / "shape_scenes.yaml"
 
 
-def render_slip_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str]
-                       ) -> list[tuple[str, pathlib.Path, SensorConfig]]:
+def render_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str]
+                  ) -> list[tuple[str, pathlib.Path, SensorConfig]]:
     """The scenes of ``scenes_file`` as bags in ``out``: (name, bag, its sensor).
 
     ``only``: these scene names (all when empty).
@@ -59,6 +71,7 @@ def render_slip_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[
     from tactile_sl_camera.sim.synth import RendererCache, write_scene_bag
 
     cache = RendererCache()
+    out.mkdir(parents=True, exist_ok=True)
     bags = []
     scenes = load_scenes(scenes_file)
     unknown = sorted(set(only) - {s.name for s in scenes})
@@ -83,19 +96,25 @@ def main() -> int:
     parser.add_argument("--no-slip", action="store_true", help="leave the slip scenes out")
     parser.add_argument("--only", action="append", default=[], metavar="SCENE",
                         help="render only this slip scene (repeatable; default: all)")
+    parser.add_argument("--shape-scenes", type=pathlib.Path, default=SHAPE_SCENES,
+                        help="indenter shapes to render and evaluate (default: %(default)s)")
+    parser.add_argument("--no-shapes", action="store_true",
+                        help="leave the indenter shape scenes out")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_touch_") as tmp:
-        slip_bags = [] if args.no_slip else render_slip_scenes(args.slip_scenes,
-                                                               pathlib.Path(tmp), args.only)
-        return _run(args, slip_bags)
+        shape_bags = ([] if args.no_shapes else
+                      render_scenes(args.shape_scenes, pathlib.Path(tmp) / "shapes", []))
+        slip_bags = [] if args.no_slip else render_scenes(args.slip_scenes,
+                                                          pathlib.Path(tmp) / "slip", args.only)
+        return _run(args, slip_bags, shape_bags)
 
 
-def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, SensorConfig]]
-         ) -> int:
+def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, SensorConfig]],
+         shape_bags: list[tuple[str, pathlib.Path, SensorConfig]]) -> int:
     load0 = os.getloadavg()
     pipe = StereoPipeline(PatternSpec.load(None))
     times: dict[str, list[float]] = {"touch": [], "slip": [], "pipeline": []}
-    report = slip_report = None
+    report = slip_report = shape_report = None
     t0 = time.perf_counter()
     try:
         for rep in range(max(1, args.repeat)):
@@ -111,6 +130,11 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
                                               if control else "")
                 per_bag.append((name, what, frames))
                 _collect(times, frames)
+            per_shape = []
+            for name, path, sensor in shape_bags:
+                frames = evaluate_touch_bag(path, pipe, sensor, progress=progress)
+                per_shape.append((name, frames))
+                _collect(times, frames)
             per_scene = []
             for name, path, sensor in slip_bags:
                 frames = evaluate_touch_bag(path, pipe, sensor, progress=progress)
@@ -119,12 +143,17 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
             if report is None:
                 report = format_report(per_bag)[0]
                 slip_report = format_slip_report(per_scene) if per_scene else None
+                shape_report = format_shape_report(per_shape) if per_shape else None
     finally:
         pipe.close()
     wall = time.perf_counter() - t0
     load1 = os.getloadavg()
     print(report)
     print()
+    if shape_report:
+        print(f"indenter shapes ({args.shape_scenes}):")
+        print(shape_report)
+        print()
     if slip_report:
         print(f"slip ({args.slip_scenes}; truth t / estimate e; docs/slip.md):")
         print(slip_report)

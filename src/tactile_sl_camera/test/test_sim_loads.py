@@ -15,7 +15,12 @@ from tactile_sl_camera.clouds import (
 from tactile_sl_camera.elasticity import Elastomer, surface_displacement
 from tactile_sl_camera.sim.artwork import load_artwork, random_values, write_artwork
 from tactile_sl_camera.sim.contact import Contact, FieldGrid, PadParams
-from tactile_sl_camera.sim.loads import LoadContact, resultant, touch_truth_from_messages
+from tactile_sl_camera.sim.loads import (
+    LoadContact,
+    resultant,
+    touch_truth,
+    touch_truth_from_messages,
+)
 from tactile_sl_camera.sim.render import Renderer
 from tactile_sl_camera.sim.scenes import SceneError, load_scenes, parse_scene
 from tactile_sl_camera.sim.synth import frame_messages, render_scene_frame
@@ -85,6 +90,10 @@ LOAD = {"indenter": {"kind": "load", "radius": 0.003},
     (_scene({**LOAD, "keyframes": [{"frame": 0, "force": [0, 0, 0.5]}]}), "fz must be <= 0"),
     (_scene({**LOAD, "indenter": {"kind": "load", "radius": -0.001}}), "radius"),
     (_scene({**LOAD, "keyframes": [{"frame": 0, "x": 0.012}]}), "leaves the simulated pad"),
+    (_scene({**LOAD, "indenter": {"kind": "load", "radius": 0.001, "profile": "cylinder",
+                                  "length": 0.02}}), "leaves the simulated pad"),
+    (_scene({**LOAD, "indenter": {"kind": "load", "radius": 0.001, "length": 0.002}}),
+     "length is the axis of profile cylinder"),
     (_scene(LOAD, mirrored=True), "mirrored"),
     (_scene(LOAD, elastomer={"youngs_modulus": 3e5, "poison_ratio": 0.4}), "poison_ratio"),
     (_scene(LOAD, elastomer={"youngs_modulus": -1.0}), "youngs_modulus"),
@@ -108,10 +117,11 @@ def test_load_keyframes_interpolate_and_default_elastomer():
     assert not parse_scene({"name": "n"}).has_loads
 
 
-@pytest.mark.parametrize("profile", ["hertz", "uniform"])
+@pytest.mark.parametrize("profile", ["hertz", "uniform", "punch", "cylinder"])
 def test_traction_carries_the_requested_force_and_moment(profile):
+    length = 0.002 if profile == "cylinder" else 0.0
     load = LoadContact(radius=0.002, profile=profile, x=0.0007, y=-0.0004,
-                       force=(0.1, -0.05, -0.8), torque=3e-4)
+                       force=(0.1, -0.05, -0.8), torque=3e-4, length=length, angle=0.5)
     g = FieldGrid.build([load], PadParams(), **SMALL)
     X, Y = np.meshgrid(g.xs, g.ys)
     f = g.traction * g.spacing**2
@@ -120,10 +130,47 @@ def test_traction_carries_the_requested_force_and_moment(profile):
                       axis=-1).reshape(-1, 3).sum(axis=0)
     _, expected = resultant([load])
     assert moment == pytest.approx(expected, rel=1e-6, abs=1e-12)
-    assert np.all(np.hypot(X - load.x, Y - load.y)[np.any(g.traction != 0, axis=2)] < 0.002)
+    # the traction stays within the contact (a punch: the nodes its rim cuts too)
+    reach = 0.002 + (g.spacing if profile == "punch" else 0.0)
+    assert np.all(load.shape(X, Y)[1][np.any(g.traction != 0, axis=2)] < reach)
     # the field is the elastic response of that traction, over the whole grid
     assert np.array_equal(g.data, surface_displacement(HALF, g.traction, g.spacing))
     assert g.active_index == (0, g.ny, 0, g.nx)
+
+
+def test_punch_presses_its_face_flat_and_its_truth_leaves_the_rim_out():
+    """A rigid flat punch's pressure (infinite at the rim) displaces its face uniformly."""
+    a = 0.0015
+    punch = LoadContact(radius=a, profile="punch", x=0.0003, y=-0.0001, force=(0, 0, -1.0))
+    grid = {"x0": -0.005, "y0": -0.005, "spacing": 4e-5, "nx": 251, "ny": 251}
+    g = FieldGrid.build([punch], PadParams(), **grid)
+    X, Y = np.meshgrid(g.xs, g.ys)
+    r = np.hypot(X - punch.x, Y - punch.y)
+    uz = -g.data[..., 2]
+    face = uz[r < a - 3 * g.spacing]
+    assert np.ptp(face) < 0.005 * face.mean()          # flat to 0.5 % (about 4 um)
+    p = -g.traction[..., 2]
+    assert p[r < 0.5 * a].max() < p[(r > 0.9 * a) & (r < a)].max() / 2   # peaks at the rim
+    truth = touch_truth([punch], g.traction, g.data[..., 2], g.xs, g.ys, g.spacing,
+                        (np.zeros(1), np.zeros(1)),
+                        (np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))))
+    assert truth.area == pytest.approx(np.pi * a * a, rel=0.005)
+    assert truth.max_depth == pytest.approx(face.max(), rel=1e-9)     # not the rim's ripple
+    assert truth.region_area[0] == pytest.approx(truth.area)
+
+
+def test_cylinder_presses_a_strip_with_rounded_ends():
+    cyl = LoadContact(radius=0.001, profile="cylinder", length=0.004, angle=np.radians(30),
+                      force=(0, 0, -0.5))
+    g = FieldGrid.build([cyl], PadParams(), **SMALL)
+    X, Y = np.meshgrid(g.xs, g.ys)
+    pressed = g.traction[..., 2] < 0
+    area = pressed.sum() * g.spacing ** 2
+    assert area == pytest.approx(2 * 0.001 * 0.004 + np.pi * 0.001 ** 2, rel=0.02)
+    along = (X * np.cos(np.radians(30)) + Y * np.sin(np.radians(30)))[pressed]
+    assert along.max() == pytest.approx(0.003, abs=2e-4)       # half length + half-width
+    with pytest.raises(ValueError, match="length"):
+        LoadContact(radius=0.001, profile="hertz", length=0.002)
 
 
 def test_loads_superpose_with_indenters():
@@ -235,6 +282,17 @@ def test_pack_field_layout():
         pack_field(xyz, np.full((2, 3), np.nan), rows, cols)
     with pytest.raises(CloudFormatError, match="lacks"):
         cloud_to_arrays(_Msg(cloud_fields(packed, (0, 0), "p")), FIELD_FORCE_DTYPE)
+
+
+def test_shape_scenes_file_is_valid():
+    """bags/shape_scenes.yaml (bench_touch): a punch, a cylinder, an edge, two contacts."""
+    scenes = {s.name: s for s in load_scenes(BAGS / "shape_scenes.yaml")}
+    profiles = {c.profile for s in scenes.values() for c in s.contacts_at(1)}
+    assert {"hertz", "punch", "cylinder"} <= profiles
+    cyl = scenes["shape_cylinder"].contacts_at(1)[0]
+    assert cyl.length == pytest.approx(0.005) and cyl.angle == pytest.approx(np.radians(30))
+    assert len(scenes["shape_two_contacts"].contacts_at(1)) == 2
+    assert scenes["shape_layer"].elastomer.thickness == pytest.approx(0.002)
 
 
 def test_touch_scenes_file_is_valid():

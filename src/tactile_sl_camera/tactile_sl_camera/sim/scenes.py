@@ -22,11 +22,12 @@ edge, flat), radius, length, angle_deg, fillet. Keyframe keys: frame, depth, x, 
 shear [sx, sy], angle_deg.
 
 Load contacts (known tractions, see ``loads.py``): indenter ``{kind: load, radius, profile:
-hertz | uniform, friction}``, keyframe keys frame, x, y, force [fx, fy, fz] (N, pad frame,
-fz <= 0 presses), torque (N m about the disc's normal). ``friction`` (mu > 0, Hertz loads
-without torque; on every load of the scene or on none) gives the tangential load
-Cattaneo-Mindlin partial slip, and gross slip beyond mu P (``friction.py``; ground truth
-``ground_truth/slip``)::
+hertz | uniform | punch | cylinder, friction, length, angle_deg}`` (``length`` and
+``angle_deg``: a cylinder's axis; ``radius`` is its contact half-width), keyframe keys
+frame, x, y, force [fx, fy, fz] (N, pad frame, fz <= 0 presses), torque (N m about the
+disc's normal). ``friction`` (mu > 0, Hertz loads without torque; on every load of the
+scene or on none) gives the tangential load Cattaneo-Mindlin partial slip, and gross slip
+beyond mu P (``friction.py``; ground truth ``ground_truth/slip``)::
 
       - indenter: {kind: load, radius: 0.004, profile: hertz}
         keyframes:
@@ -55,7 +56,7 @@ SCENE_KEYS = {"name", "frames", "fps", "seed", "encoding", "start_time", "supers
               "artwork", "description", "elastomer"}
 INDENTER_KEYS = {"kind", "radius", "length", "angle_deg", "fillet"}
 KEYFRAME_KEYS = {"frame", "depth", "x", "y", "shear", "angle_deg"}
-LOAD_KEYS = {"kind", "radius", "profile", "friction"}
+LOAD_KEYS = {"kind", "radius", "profile", "friction", "length", "angle_deg"}
 LOAD_KEYFRAME_KEYS = {"frame", "x", "y", "force", "torque"}
 ELASTOMER_KEYS = {"youngs_modulus", "poisson_ratio", "thickness"}
 DEFAULT_START_TIME = 1_700_000_000
@@ -135,7 +136,9 @@ class ContactTrack:
                                x=float(s["x"]), y=float(s["y"]),
                                force=tuple(float(v) for v in s["force"]),  # type: ignore
                                torque=float(s["torque"]), elastomer=elastomer,
-                               friction=float(self.indenter.get("friction", 0.0)))
+                               friction=float(self.indenter.get("friction", 0.0)),
+                               length=float(self.indenter.get("length", 0.0)),
+                               angle=float(np.radians(self.indenter.get("angle_deg", 0.0))))
         return Contact(kind=str(self.indenter.get("kind", "sphere")),
                        radius=float(self.indenter.get("radius", 0.005)),
                        length=float(self.indenter.get("length", 0.0)),
@@ -198,9 +201,10 @@ def _check_on_grid(load: LoadContact, frame: int) -> None:
     """A load's disc must lie on the simulator's field grid, or its traction is cut off."""
     x1 = FieldGrid.x0 + (FieldGrid.nx - 1) * FieldGrid.spacing
     y1 = FieldGrid.y0 + (FieldGrid.ny - 1) * FieldGrid.spacing
-    if (load.x - load.radius < FieldGrid.x0 or load.x + load.radius > x1
-            or load.y - load.radius < FieldGrid.y0 or load.y + load.radius > y1):
-        raise ValueError(f"frame {frame}: the load disc (radius {load.radius} m at "
+    reach = load.reach
+    if (load.x - reach < FieldGrid.x0 or load.x + reach > x1
+            or load.y - reach < FieldGrid.y0 or load.y + reach > y1):
+        raise ValueError(f"frame {frame}: the load disc (radius {reach} m at "
                          f"({load.x}, {load.y}) m) leaves the simulated pad "
                          f"[{FieldGrid.x0}, {x1:.4f}] x [{FieldGrid.y0}, {y1:.4f}] m")
 

@@ -66,6 +66,8 @@ class TouchFrameMetrics:
     timings_ms: dict[str, float] = field(default_factory=dict)
     slip_est: Any = None           # the stage's SlipEstimate (None: no output)
     slip_true: Any = None          # the truth's ContactSlip (None: no friction model)
+    regions_est: int = 0           # contact regions reported
+    regions_true: int = 0          # pressing regions of the truth
 
     # ------------------------------------------------------------ errors (est - true)
 
@@ -251,7 +253,9 @@ def compare_frame(result: Any | None, truth: Any | None, bag: str = "", stamp_ns
         np.asarray(c.centroid, np.float64)[:2], centroid_true, float(c.area), area_true,
         float(c.max_depth), depth_true, bool(c.in_contact), contact_true, untouched,
         slip_est=getattr(result, "slip", None),
-        slip_true=None if truth is None else getattr(truth, "slip", None))
+        slip_true=None if truth is None else getattr(truth, "slip", None),
+        regions_est=len(c.region_force),
+        regions_true=0 if truth is None else len(truth.region_force))
 
 
 # ---------------------------------------------------------------------- bags
@@ -445,3 +449,62 @@ def format_report(per_bag: list[tuple[str, str, list[TouchFrameMetrics]]],
                                                            for k, v in failing.items()))
           if failing else "every frame within the acceptance limits", file=out)
     return out.getvalue().rstrip("\n"), totals
+
+
+# ---------------------------------------------------------------------- any indenter
+
+
+@dataclass(frozen=True)
+class ShapeLimits:
+    """Issue 25's limits for the contact area and the largest indentation, any indenter."""
+
+    area_rel: float = 0.15
+    depth: float = 10e-6      # m
+
+
+SHAPE_LIMITS = ShapeLimits()
+SHAPE_HEADER = (f"{'scene':<20} {'t s':>4} {'Fn true':>7} {'area true':>9} {'est':>7} "
+                f"{'dArea%':>7} {'regions':>7} {'depth true':>10} {'est':>7} {'dDep':>6}  result")
+SHAPE_UNITS = (f"{'':<20} {'':>4} {'N':>7} {'mm2':>9} {'mm2':>7} {'':>7} {'e/t':>7} "
+               f"{'um':>10} {'um':>7} {'um':>6}")
+
+
+def shape_checks(f: TouchFrameMetrics, limits: ShapeLimits = SHAPE_LIMITS) -> list[str]:
+    """Names of the limits a frame in contact misses: ``area``, ``depth`` (no output: both)."""
+    if not f.output:
+        return ["area", "depth"]
+    failed = []
+    if f.contact_true and not (f.contact_est and abs(f.area_err_pct) <= 100 * limits.area_rel):
+        failed.append("area")
+    if abs(f.depth_err) > limits.depth:
+        failed.append("depth")
+    return failed
+
+
+def format_shape_report(per_scene: list[tuple[str, list[TouchFrameMetrics]]],
+                        limits: ShapeLimits = SHAPE_LIMITS) -> str:
+    """Area and largest indentation per frame of each scene, then the worst of each scene."""
+    lines = [f"contact area and largest indentation (limits |dArea| <= "
+             f"{100 * limits.area_rel:g} %, |dDep| <= {limits.depth * 1e6:g} um; "
+             "docs/touch_evaluation.md)", SHAPE_HEADER, SHAPE_UNITS]
+    worst = []
+    for name, frames in per_scene:
+        t0 = min((f.stamp_ns for f in frames), default=0)
+        t0 -= t0 % 1_000_000_000
+        for f in frames:
+            failed = shape_checks(f, limits)
+            lines.append(
+                f"{name:<20} {(f.stamp_ns - t0) / 1e9:>4.1f} {_f(f.normal_true, '.3f', 7)} "
+                f"{f.area_true * 1e6:>9.2f} {f.area_est * 1e6:>7.2f} "
+                f"{_f(f.area_err_pct, '+.1f', 7)} "
+                f"{f'{f.regions_est}/{f.regions_true}':>7} "
+                f"{f.depth_true * 1e6:>10.1f} {f.depth_est * 1e6:>7.1f} "
+                f"{_f(1e6 * f.depth_err, '+.1f', 6)}  "
+                + ("pass" if not failed else "FAIL " + ",".join(failed)))
+        area = [abs(f.area_err_pct) for f in frames if math.isfinite(f.area_err_pct)]
+        depth = [abs(f.depth_err) * 1e6 for f in frames]
+        within = sum(not shape_checks(f, limits) for f in frames)
+        worst.append(f"{name:<20} worst |dArea| {max(area, default=NAN):5.1f} %, |dDep| "
+                     f"{max(depth, default=NAN):5.1f} um, {within}/{len(frames)} frames "
+                     "within the limits")
+    return "\n".join(lines + [""] + worst)

@@ -11,6 +11,10 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
+from scipy import ndimage
+
+from tactile_sl_decoder.jit import helper, kernel
+from tactile_sl_decoder.touch.support import SupportRegions, support_regions
 
 
 @dataclass
@@ -22,9 +26,13 @@ class ContactParams:
     area_fraction: float = 0.0   # a cell counts into the area above this x its region's
                                  # peak; 0 = the traction solver's choice for the elastomer
     core_fraction: float = 0.3   # a region's centroid from its cells above this x its peak
-    displacement_noise: float = 3e-6   # m per axis: weighs the two centroid estimates
+    displacement_noise: float = 3e-6   # m per axis: weighs the two centroid estimates, and
+                                       # the noise of the area's support and of max_depth
     map_centroid_sigma: float = 6e-5   # m: uncertainty of the map's centroid (pitch / 8)
     depth_upsample: int = 4    # depth-map pixels per cell pitch
+    support_sigmas: float = 2.0   # a cell is in the area's support above this x its noise
+    support_edge_snr: float = 5.0   # ... and a region's area is taken from the support when
+                                    # its edge presses by this x the noise (else the map's)
 
     def validate(self) -> "ContactParams":
         """Raise ValueError for values outside their ranges."""
@@ -39,6 +47,8 @@ class ContactParams:
             raise ValueError(f"area_fraction must be in [0, 1), got {self.area_fraction}")
         if not 1 <= self.depth_upsample <= 16:
             raise ValueError(f"depth_upsample must be in 1..16, got {self.depth_upsample}")
+        if not (self.support_sigmas > 0 and self.support_edge_snr > 0):
+            raise ValueError("support_sigmas and support_edge_snr must be > 0")
         return self
 
 
@@ -60,62 +70,278 @@ class ContactState:
 
 
 _DR, _DC = (a.ravel() for a in np.mgrid[-1:2, -1:2])
-# Least-squares operator of z = a + b x + c y + d x^2 + e y^2 + g x y on the full 3x3 stencil.
-_STENCIL = np.linalg.pinv(np.column_stack([np.ones(9), _DC, _DR, _DC ** 2, _DR ** 2,
-                                           _DC * _DR]).astype(float))
+# z = a + b x + c y + d x^2 + e y^2 + g x y on the 3x3 stencil (x along columns, in cells)
+_DESIGN = np.column_stack([np.ones(9), _DC, _DR, _DC ** 2, _DR ** 2, _DC * _DR]).astype(float)
+_RING = np.flatnonzero((_DR != 0) | (_DC != 0))
+# the centre value of the quadratic through the 8 neighbours, and the standard deviation of a
+# cell's difference from it per unit of i.i.d. noise
+_FROM_RING = np.linalg.pinv(_DESIGN[_RING])[0]
+_FROM_RING_SPREAD = float(np.sqrt(1.0 + _FROM_RING @ _FROM_RING))
+# standard deviation of a curvature 2d (or 2e) of the full-stencil fit per unit of noise
+_CURVATURE_SPREAD = float(2.0 * np.sqrt(np.linalg.inv(_DESIGN.T @ _DESIGN)[3, 3]))
+_CROSS_CHECK = np.array([[0, 2], [0, -2], [2, 0], [-2, 0]])   # (row, col): two cells away
+OUTLIER_SIGMAS = 5.0    # a cell this far (x its spread) from its neighbours' quadratic: dropped
+FIT_SIGMAS = 3.0        # a neighbourhood fits a quadratic when its residual RMS is below this
+CURVATURE_SIGMAS = 3.0  # the peak is moved between cells along curvatures beyond this
+CANDIDATES = 16         # neighbourhoods of the deepest cells fitted
 
 
-def max_indentation(indent: np.ndarray) -> float:
+def max_indentation(indent: np.ndarray, noise: float = 3e-6) -> float:
     """Largest indentation of a (rows, cols) grid (NaN = not decoded), between cells too.
 
-    A quadratic z = a + b x + c y + d x^2 + e y^2 + g x y is fitted by least squares to the
-    decoded cells of the 3x3 neighbourhood of the deepest cell; its stationary point gives
-    the peak when it is a maximum within one cell (a spherical tip's surface is exactly such
-    a paraboloid inside the contact).  Never less than the deepest decoded cell, never < 0.
+    ``noise``: the displacement noise per cell (m).  Robust to the few cells a decoder gets
+    wrong where the surface is steep (the rim of a flat punch: up to 90 um off):
+
+    1. a cell farther than ``OUTLIER_SIGMAS`` x its spread both from the quadratic through
+       its 8 neighbours (the surface's second-order Taylor expansion) and from their median
+       is left out: a lone cell off its surroundings (a sphere's apex fits the quadratic, a
+       small flat face ringed by a steep rim sits at its neighbours' median);
+    2. the 3x3 neighbourhoods (of the cells left) of the ``CANDIDATES`` deepest cells are
+       fitted with z = a + b x + c y + d x^2 + e y^2 + g x y by least squares (7 cells or
+       more); a candidate's value is the fit's centre value a where the residual RMS is
+       within ``FIT_SIGMAS`` x the noise (a smooth surface: a sphere's apex, a punch's face,
+       a cylinder's crest), else its own (a steep or broken neighbourhood); the largest wins;
+    3. a smooth winner's peak moves from its centre along the directions of the fit's
+       curvature that stand out of the noise (``CURVATURE_SIGMAS``), to the stationary point
+       when it lies within one cell and the fit predicts the cells two cells away along the
+       rows and columns (two of them at least, each within 4 x noise + half the predicted
+       drop: a step that three cells cannot tell from a dome fails it).  A spherical tip's
+       surface is exactly such a paraboloid inside the contact; a flat face has no
+       curvature to move along.
+
+    Never negative.  No candidate left: the deepest cell kept around them (or the deepest
+    cell); no neighbourhood of 7 cells: the deepest candidate.  Compiled (numba): only the
+    cells around the deepest ones are looked at.
     """
-    flat = np.nan_to_num(indent, nan=-np.inf)
-    i = int(np.argmax(flat))
-    best = float(flat.flat[i])
-    if not np.isfinite(best):
+    grid = np.ascontiguousarray(indent, dtype=np.float64)
+    if grid.size == 0:
         return 0.0
-    r0, c0 = divmod(i, indent.shape[1])
-    r, c = r0 + _DR, c0 + _DC
-    if r0 >= 1 and c0 >= 1 and r0 + 1 < indent.shape[0] and c0 + 1 < indent.shape[1]:
-        z = indent[r, c]
-        good = np.isfinite(z)
-        if good.all():
-            coef = _STENCIL @ z
-        elif good.sum() >= 7:
-            a = np.column_stack([np.ones(9), _DC, _DR, _DC ** 2, _DR ** 2, _DC * _DR])
-            coef = np.linalg.lstsq(a[good].astype(float), z[good], rcond=None)[0]
+    return float(_max_indentation(grid, float(noise), CANDIDATES, OUTLIER_SIGMAS, FIT_SIGMAS,
+                                  CURVATURE_SIGMAS))
+
+
+@helper
+def _kept(z: np.ndarray, r: int, c: int, limit: float) -> bool:
+    """Decoded, and near the quadratic through its 8 neighbours or near their median."""
+    rows, cols = z.shape
+    if r < 0 or c < 0 or r >= rows or c >= cols or not np.isfinite(z[r, c]):
+        return False
+    if r < 1 or c < 1 or r + 1 >= rows or c + 1 >= cols:
+        return True                         # not all 8 neighbours: not tested
+    pred = 0.0
+    ring = np.empty(8)
+    for j in range(8):
+        v = z[r + _DR[_RING[j]], c + _DC[_RING[j]]]
+        if not np.isfinite(v):
+            return True
+        pred += _FROM_RING[j] * v
+        ring[j] = v
+    if abs(z[r, c] - pred) <= limit:
+        return True
+    ring.sort()                        # and off the neighbours' median: a lone cell
+    return abs(z[r, c] - 0.5 * (ring[3] + ring[4])) <= limit
+
+
+@helper
+def _solve6(a: np.ndarray, b: np.ndarray) -> bool:
+    """Solve a x = b in place (b <- x) for a 6x6 symmetric positive definite a (Cholesky)."""
+    n = 6
+    for j in range(n):
+        d = a[j, j]
+        for k in range(j):
+            d -= a[j, k] * a[j, k]
+        if d <= 0.0:
+            return False
+        d = np.sqrt(d)
+        a[j, j] = d
+        for i in range(j + 1, n):
+            s = a[i, j]
+            for k in range(j):
+                s -= a[i, k] * a[j, k]
+            a[i, j] = s / d
+    for i in range(n):
+        s = b[i]
+        for k in range(i):
+            s -= a[i, k] * b[k]
+        b[i] = s / a[i, i]
+    for i in range(n - 1, -1, -1):
+        s = b[i]
+        for k in range(i + 1, n):
+            s -= a[k, i] * b[k]
+        b[i] = s / a[i, i]
+    return True
+
+
+@helper
+def _deepest(z: np.ndarray, count: int) -> tuple[np.ndarray, float]:
+    """The ``count`` deepest decoded cells and the deepest value.
+
+    Flat indices, deepest first (-1: fewer cells), ties in their order; -inf: none decoded.
+    """
+    rows, cols = z.shape
+    top = np.full(count, -1, np.int64)
+    topv = np.full(count, -np.inf)
+    best = -np.inf
+    for i in range(rows * cols):
+        v = z[i // cols, i % cols]
+        if not np.isfinite(v):
+            continue
+        best = max(best, v)
+        if v > topv[count - 1]:
+            k = count - 1
+            while k > 0 and topv[k - 1] < v:
+                topv[k] = topv[k - 1]
+                top[k] = top[k - 1]
+                k -= 1
+            topv[k] = v
+            top[k] = i
+    return top, best
+
+
+@helper
+def _fit(z: np.ndarray, r: int, c: int, limit: float, coef: np.ndarray) -> float:
+    """Quadratic through the kept cells of (r, c)'s 3x3 into ``coef``; its residual RMS.
+
+    -1 when fewer than 7 cells are kept (or the fit is singular).
+    """
+    normal = np.zeros((6, 6))
+    coef[:] = 0.0
+    count = 0
+    for j in range(9):
+        rr, cc = r + _DR[j], c + _DC[j]
+        if not _kept(z, rr, cc, limit):
+            continue
+        count += 1
+        for a in range(6):
+            coef[a] += _DESIGN[j, a] * z[rr, cc]
+            for b in range(6):
+                normal[a, b] += _DESIGN[j, a] * _DESIGN[j, b]
+    if count < 7 or not _solve6(normal, coef):
+        return -1.0
+    ss = 0.0
+    for j in range(9):
+        rr, cc = r + _DR[j], c + _DC[j]
+        if _kept(z, rr, cc, limit):
+            f = 0.0
+            for a in range(6):
+                f += _DESIGN[j, a] * coef[a]
+            ss += (z[rr, cc] - f) ** 2
+    return np.sqrt(ss / max(count - 6, 1))
+
+
+@helper
+def _gain(cf: np.ndarray, threshold: float) -> tuple[float, float, float]:
+    """(x, y) step to the stationary point along the curvatures below ``threshold``; the rise.
+
+    The eigen-decomposition of the Hessian [[2d, g], [g, 2e]] in closed form.
+    """
+    h11, h22, h12 = 2.0 * cf[3], 2.0 * cf[4], cf[5]
+    mean = 0.5 * (h11 + h22)
+    rad = np.sqrt(0.25 * (h11 - h22) ** 2 + h12 * h12)
+    theta = 0.5 * np.arctan2(2.0 * h12, h11 - h22)      # the larger eigenvalue's axis
+    sx, sy, gain = 0.0, 0.0, 0.0
+    for sign in (-1.0, 1.0):
+        lam = mean + sign * rad
+        if lam >= threshold:
+            continue
+        if sign > 0:
+            vx, vy = np.cos(theta), np.sin(theta)
         else:
-            return max(best, 0.0)
-        # a maximum: negative-definite Hessian [[2d, g], [g, 2e]]
-        d2, e2, g = 2 * coef[3], 2 * coef[4], coef[5]
-        det = d2 * e2 - g * g
-        if d2 < 0 and det > 0:
-            xs = (-coef[1] * e2 + coef[2] * g) / det
-            ys = (-coef[2] * d2 + coef[1] * g) / det
-            if abs(xs) <= 1.0 and abs(ys) <= 1.0:
-                peak = float(coef[0] + coef[1] * xs + coef[2] * ys + coef[3] * xs * xs
-                             + coef[4] * ys * ys + coef[5] * xs * ys)
-                best = max(best, peak)
+            vx, vy = -np.sin(theta), np.cos(theta)
+        slope = cf[1] * vx + cf[2] * vy
+        sx += (-slope / lam) * vx
+        sy += (-slope / lam) * vy
+        gain += -slope * slope / (2.0 * lam)
+    return sx, sy, gain
+
+
+@helper
+def _predicts_cross(z: np.ndarray, r0: int, c0: int, cf: np.ndarray, limit: float,
+                    noise: float) -> bool:
+    """The fit predicts at least two kept cells two cells away along rows and columns."""
+    checked = 0
+    for k in range(4):
+        dr, dc = _CROSS_CHECK[k, 0], _CROSS_CHECK[k, 1]
+        if _kept(z, r0 + dr, c0 + dc, limit):
+            checked += 1
+            q = (cf[0] + cf[1] * dc + cf[2] * dr + cf[3] * dc * dc + cf[4] * dr * dr
+                 + cf[5] * dc * dr)
+            if abs(z[r0 + dr, c0 + dc] - q) > 4.0 * noise + 0.5 * abs(cf[0] - q):
+                return False
+    return checked >= 2
+
+
+@kernel("float64(float64[:, ::1], float64, int64, float64, float64, float64)")
+def _max_indentation(z: np.ndarray, noise: float, candidates: int, outlier_sigmas: float,
+                     fit_sigmas: float, curvature_sigmas: float) -> float:
+    """The steps of :func:`max_indentation` (see there)."""
+    cols = z.shape[1]
+    limit = outlier_sigmas * _FROM_RING_SPREAD * noise
+    top, best_valid = _deepest(z, candidates)
+    if best_valid == -np.inf:
+        return 0.0
+    kept_best = -np.inf          # around the candidates
+    deepest_kept = -np.inf       # of the candidates
+    best = -np.inf
+    best_smooth = False
+    best_cell = -1
+    coef = np.zeros(6)
+    best_coef = np.zeros(6)
+    for m in range(candidates):
+        i = top[m]
+        if i < 0:
+            break
+        r, c = i // cols, i % cols
+        for dr in range(-2, 3):
+            for dc in range(-2, 3):
+                if _kept(z, r + dr, c + dc, limit):
+                    kept_best = max(kept_best, z[r + dr, c + dc])
+        if not _kept(z, r, c, limit):
+            continue
+        deepest_kept = max(deepest_kept, z[r, c])
+        rms = _fit(z, r, c, limit, coef)
+        if rms < 0.0:
+            continue
+        smooth = rms <= fit_sigmas * noise
+        value = coef[0] if smooth else z[r, c]
+        if best_cell < 0 or value > best:
+            best, best_smooth, best_cell = value, smooth, i
+            best_coef[:] = coef
+    if kept_best == -np.inf:
+        return max(best_valid, 0.0)
+    if deepest_kept == -np.inf:
+        return max(kept_best, 0.0)
+    if best_cell < 0:
+        return max(deepest_kept, 0.0)
+    if best_smooth:
+        sx, sy, gain = _gain(best_coef, -curvature_sigmas * _CURVATURE_SPREAD * noise)
+        if (gain > 0.0 and abs(sx) <= 1.0 and abs(sy) <= 1.0
+                and _predicts_cross(z, best_cell // cols, best_cell % cols, best_coef, limit,
+                                    noise)):
+            best += gain
     return max(best, 0.0)
 
 
 def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                   forces: np.ndarray, wrench: np.ndarray, shape: tuple[int, int], pitch: float,
                   indent_grid: np.ndarray, was_in_contact: bool, params: ContactParams,
-                  moment_noise: tuple[float, float] = (0.0, 0.0)) -> ContactState:
+                  moment_noise: tuple[float, float] = (0.0, 0.0),
+                  support: tuple[np.ndarray, np.ndarray] | None = None) -> ContactState:
     """Contact state from per-cell forces (N) at rest positions (m) and the resultant.
 
-    Normal and shear force come from the resultant.  The area and the regions come from
-    the per-cell map: a cell counts into the area when it presses by more than
-    ``area_fraction`` of the map's peak, and a region is a set of 8-connected pressing cells
-    with at least one such cell (smaller ripples of the map are not contacts; the map
-    is smooth over about a cell, so its low skirt lies outside the contact; the stage
-    passes the fraction its traction solver calibrated for the elastomer, see
+    Normal and shear force come from the resultant.  The regions come from the per-cell
+    map: a region is a set of 8-connected pressing cells with at least one cell pressing by
+    more than ``area_fraction`` of the map's peak (smaller ripples of the map are not
+    contacts).  With ``support`` (the constrained pressure and its noise, N, per reference
+    cell, :mod:`.support`) a map region holding regions of the traction's support that
+    locate their edge (``support_edge_snr``) is split among them (each map cell to the
+    nearest: two contacts whose skirts join in the map stay two), and each takes the area
+    of its support region.  Otherwise a region's area is that of the map's cells above
+    ``area_fraction`` of its peak (the map is smooth over about a cell, so its low skirt
+    lies outside the contact; the stage passes the fraction its traction solver calibrated
+    on Hertz discs for the elastomer, see
     :meth:`~tactile_sl_decoder.touch.traction.TractionSolver._area_fraction`).
+    ``max_depth``: :func:`max_indentation` with ``displacement_noise``.
 
     The centroid has two estimates: the resultant's, (M_y, -M_x) / P (exact for tractions
     at z = 0 since M = sum r x f, but its noise grows with the lever arms of the whole
@@ -130,7 +356,7 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     cell_area = pitch * pitch
     state = ContactState(normal_force=normal,
                          shear_force=(float(wrench[0]), float(wrench[1]), 0.0),
-                         max_depth=max_indentation(indent_grid))
+                         max_depth=max_indentation(indent_grid, params.displacement_noise))
     threshold = params.force_off if was_in_contact else params.force_on
     state.in_contact = normal > threshold
     pressing = press > 0.0
@@ -143,16 +369,26 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     region = labels[rows, cols]
     regions = []
     level = params.area_fraction * float(press.max())
+    found = _support(support, rows, cols, shape, params)
     for k in range(1, count):
         sel = pressing & (region == k)
         w = press[sel]
+        parts = [] if found is None else _support_parts(found, labels, k, rows[sel], cols[sel])
+        if found is not None and parts:   # the support's regions in this one, with their cells
+            for part, mine in parts:
+                wp = w[mine]
+                core = np.where(wp > params.core_fraction * wp.max(), wp, 0.0)
+                c = (core[:, None] * rest_xy[sel][mine]).sum(axis=0) / core.sum()
+                regions.append((float(wp.sum()), float(found.area_cells[part]) * cell_area,
+                                (float(c[0]), float(c[1]), 0.0), int(found.cells[part])))
+            continue
         inside = int((w > level).sum())
         if inside == 0:          # a ripple of the map, not a contact
             continue
-        f = float(w.sum())
         core = np.where(w > params.core_fraction * w.max(), w, 0.0)
         c = (core[:, None] * rest_xy[sel]).sum(axis=0) / core.sum()
-        regions.append((f, inside * cell_area, (float(c[0]), float(c[1]), 0.0), inside))
+        regions.append((float(w.sum()), inside * cell_area, (float(c[0]), float(c[1]), 0.0),
+                        inside))
     regions.sort(key=lambda t: -t[0])
     state.region_force = [r[0] for r in regions]
     state.region_area = [r[1] for r in regions]
@@ -171,6 +407,40 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     cx, cy = (w_map * from_map + w_wrench * from_wrench) / (w_map + w_wrench)
     state.centroid = (float(cx), float(cy), 0.0)
     return state
+
+
+def _support(support: tuple[np.ndarray, np.ndarray] | None, rows: np.ndarray,
+             cols: np.ndarray, shape: tuple[int, int], params: ContactParams
+             ) -> SupportRegions | None:
+    """The support's regions on the cell grid (None without ``support``)."""
+    if support is None:
+        return None
+    pressure, noise = support
+    p = np.zeros(shape)
+    sig = np.full(shape, np.inf)
+    p[rows, cols] = pressure
+    sig[rows, cols] = noise
+    found = support_regions(p, sig, params.support_sigmas)
+    found.edge_snr[found.edge_snr < params.support_edge_snr] = 0.0     # not used
+    return found
+
+
+def _support_parts(found: SupportRegions, labels: np.ndarray, k: int, rows: np.ndarray,
+                   cols: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """The support regions of map region ``k`` that locate their edge, and its cells' share.
+
+    A support region belongs to the map region holding its largest pressure.  Each of the
+    map region's cells (``rows``, ``cols``) goes to the nearest cell of those regions (two
+    contacts the map's skirt joins are told apart).  Empty when there are none.
+    """
+    ids = [int(j) for j in np.flatnonzero(found.edge_snr > 0)
+           if labels.flat[found.peak[j]] == k]
+    if not ids:
+        return []
+    seeds = np.isin(found.labels, ids) & found.support
+    _, (near_r, near_c) = ndimage.distance_transform_edt(~seeds, return_indices=True)
+    owner = found.labels[near_r[rows, cols], near_c[rows, cols]]
+    return [(j, owner == j) for j in ids if np.any(owner == j)]
 
 
 @dataclass(frozen=True)

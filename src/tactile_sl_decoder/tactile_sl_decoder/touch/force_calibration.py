@@ -26,6 +26,7 @@ import numpy as np
 from tactile_sl_camera.elasticity import Elastomer
 from tactile_sl_decoder.touch.sensor import SensorConfig, read_yaml_file
 from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
+from tactile_sl_decoder.touch.traction import TractionParams
 
 MIN_LOADS = 2
 THICKNESS_CANDIDATES = (0.0, 0.5e-3, 1e-3, 1.5e-3, 2e-3, 3e-3, 4e-3, 6e-3, 8e-3)
@@ -117,8 +118,10 @@ def _estimates(frames: list[np.ndarray], loads: list[KnownLoad], sensor: SensorC
                shape: tuple[int, int], pitch: float, mirrored: bool,
                reference_frames: int) -> tuple[np.ndarray, float]:
     """Estimated normal forces of the loaded frames, and the mean relative residual."""
+    # forces only: the contact area's constrained inversion is not prepared (0.3-0.5 s each)
     stage = TouchStage(sensor, shape, pitch, mirrored,
-                       TouchParams(reference_frames=reference_frames))
+                       TouchParams(reference_frames=reference_frames,
+                                   traction=TractionParams(support_weight=0.0)))
     wanted = {ld.frame: k for k, ld in enumerate(loads)}
     q = np.full(len(loads), np.nan)
     residuals = []

@@ -367,9 +367,14 @@ class TouchStage:
         wrench_force, wrench_moment = wrench[:3], wrench[3:]
         indent = np.full(self.shape, np.nan)
         indent[rows, cols] = -displacement[:, 2]
+        contact_params = self.contact_params
+        noise = contact_params.displacement_noise
+        pressure = self.solver.support_pressure(noise, contact_params.support_sigmas,
+                                                contact_params.support_edge_snr)
+        support = None if pressure is None else (pressure, noise * self.solver.support_gain)
         contact = contact_state(ref.nominal[:, :2], ref_rows, ref_cols, forces_ref, wrench,
                                 self.shape, self.pitch, indent, self._in_contact,
-                                self.contact_params, self.solver.moment_noise)
+                                contact_params, self.solver.moment_noise, support)
         self._in_contact = contact.in_contact
         depth = self._depth(indent)
         force = np.zeros((len(rows), 3))
