@@ -231,6 +231,17 @@ def _report(ns: str, what: str, got: dict[int, float], expected: int, first: int
            f"{np.percentile(lat, 99):.1f} ms, max {lat.max():.1f} ms" if len(lat) else ""))
     if first is None or not len(lat):
         return
+    if what == "cloud" and len(got) > 2:
+        # where the missing frames were: gaps of more than 1.5 frame periods in the stamps
+        stamps = np.array(sorted(got))
+        step = np.diff(stamps)
+        period = float(np.median(step))
+        gaps = np.flatnonzero(step > 1.5 * period)
+        if len(gaps):
+            where = ", ".join(f"{(stamps[i] - first) / 1e9:.2f} s ({round(step[i] / period) - 1})"
+                              for i in gaps[:12])
+            print(f"{ns}: frames missing after (missing): {where}"
+                  + (f" and {len(gaps) - 12} more gaps" if len(gaps) > 12 else ""))
     cut = first + settle_s * 1e9
     steady = np.array([v for stamp, v in got.items() if stamp >= cut])
     missing = sum(1 for stamp in clouds if stamp >= cut and stamp not in got)

@@ -28,13 +28,11 @@ from dataclasses import dataclass
 from itertools import combinations, product
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.decode.grid import NEIGHBOUR_SLOTS, OFFSETS, Grid, window_indices
-from tactile_sl_decoder.decode.votes import group_votes
+from tactile_sl_decoder.decode.votes import group_votes, linked_regions
 
 DIRECT_TABLE_MAX = 1 << 22   # code spaces up to this size are looked up by direct address
 
@@ -442,18 +440,13 @@ class CodewordDecoder:
         consistent but misplaced patch, e.g. a misread that copies another pattern area).
         """
         p = self.params
-        n = len(cell)
         dec = np.flatnonzero(cell >= 0)
         if len(dec) == 0:
             return cell
         _, implied = self._expected(grid.nbr, cell, lay, links)
         ok = (implied == cell[:, None]) & (cell[:, None] >= 0)
-        # CSR straight from the neighbour table (8 slots per glyph; no link = self loop);
-        # float64 weights and int32 indices are what csgraph works in (no conversion copies).
-        indices = np.where(ok, grid.nbr[:, NEIGHBOUR_SLOTS], np.arange(n)[:, None]).astype(np.int32)
-        graph = csr_matrix((np.ones(8 * n), indices.reshape(-1),
-                            np.arange(0, 8 * n + 1, 8, dtype=np.int32)), shape=(n, n))
-        _, comp = connected_components(graph, directed=False)
+        comp = linked_regions(np.ascontiguousarray(grid.nbr[:, NEIGHBOUR_SLOTS], dtype=np.int64),
+                              np.ascontiguousarray(ok))
         sizes = np.bincount(comp[dec], minlength=comp.max() + 1)
         keep = sizes[comp] >= p.min_component
         # The largest region of each image (group) is the reference for its other regions.
