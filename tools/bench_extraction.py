@@ -87,8 +87,8 @@ def stage_rows(gray: np.ndarray, repeat: int) -> list[str]:
 
 def bag_images(path: str, count: int) -> list[np.ndarray]:
     """The first ``count`` left images of a bag, grey."""
-    from tactile_sl_camera.bag_io import BagReader
-    from tactile_sl_camera.images import to_gray
+    from tactile_sl_common.bag_io import BagReader
+    from tactile_sl_common.images import to_gray
 
     out = []
     for _, msg in BagReader(path).messages(["/tactile/left/image_raw"]):

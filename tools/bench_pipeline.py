@@ -204,7 +204,7 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
     fresh touch reference per pass.  With ``--carry both`` the pipeline with and without
     carried labels alternate pass by pass, so their figures come from the same sitting.
     """
-    from tactile_sl_camera.images import to_gray
+    from tactile_sl_common.images import to_gray
     from tactile_sl_decoder.cpu_threads import set_cpu_threads
     from tactile_sl_decoder.frames import bag_frames
     from tactile_sl_decoder.tooling.e2e_metrics import aggregate, format_table, frame_metrics
@@ -380,7 +380,7 @@ def through_ros(args: argparse.Namespace) -> int:  # noqa: C901 - a report scrip
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_common.bag_io import BagReader
 
     exe = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder" / "decoder"
     domain = 150 + os.getpid() % 50

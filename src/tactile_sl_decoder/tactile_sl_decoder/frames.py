@@ -33,7 +33,7 @@ def bag_topics(namespace: str = "/tactile") -> dict[str, str]:
 
 def count_bag_frames(path: str | Path, namespace: str = "/tactile") -> int:
     """Number of left images in a bag (for progress bars)."""
-    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_common.bag_io import BagReader
 
     reader = BagReader(path)
     topic = bag_topics(namespace)["left_image"]
@@ -50,7 +50,7 @@ def bag_frames(path: str | Path, namespace: str = "/tactile",
     missing camera_info topics unless ``camera_info`` is False (the caller has the
     calibration from elsewhere: the frames' infos are then None where the bag has none).
     """
-    from tactile_sl_camera.bag_io import BagReader, header_stamp_of_cdr
+    from tactile_sl_common.bag_io import BagReader, header_stamp_of_cdr
 
     reader = BagReader(path)
     topics = bag_topics(namespace)

@@ -23,8 +23,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from tactile_sl_camera.camera_info import CameraInfoError
-from tactile_sl_camera.clouds import POINT_DTYPE, pack_points
+from tactile_sl_common.camera_info import CameraInfoError
+from tactile_sl_common.clouds import POINT_DTYPE, pack_points
 from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval

@@ -17,7 +17,7 @@ from typing import Iterator, Sequence
 # Subcommand modules in help order; one whose package is not installed is omitted.
 SUBCOMMAND_MODULES: tuple[str, ...] = (
     "tactile_sl_decoder.cli.pattern_cmd",
-    "tactile_sl_camera.cli.synth_cmd",
+    "tactile_sl_sim.cli.synth_cmd",
     "tactile_sl_decoder.cli.calibrate_cmd",
     "tactile_sl_decoder.cli.train_cmd",
     "tactile_sl_decoder.cli.evaluate_cmd",

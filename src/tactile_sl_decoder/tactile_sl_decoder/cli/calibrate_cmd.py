@@ -4,7 +4,8 @@ Modes, one per source option (mutually exclusive), dispatched by :func:`run`:
 
 - ``--folder DIR`` / ``--bag BAG``: calibrate from image pairs; with ``--target PATTERN.yaml``
   from views of the printed pattern (:mod:`tactile_sl_decoder.calibrate`), else from a
-  checkerboard (``--pattern COLSxROWS --square M``, :mod:`tactile_sl_camera.calibration`);
+  checkerboard (``--pattern COLSxROWS --square M``,
+  :mod:`tactile_sl_decoder.calibrate.checkerboard`);
 - ``--simulate N``: write N simulated view pairs and the true calibration (pattern views with
   ``--target``, else checkerboards);
 - ``--check BAG``: judge a calibration from untouched frames of the assembled sensor;
@@ -139,9 +140,9 @@ def _mode(args: argparse.Namespace) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``tactile-sl calibrate``: one handler per mode."""
-    from tactile_sl_camera.bag_io import BagError
-    from tactile_sl_camera.calibration import CalibrationError
-    from tactile_sl_camera.camera_info import CameraInfoError
+    from tactile_sl_common.bag_io import BagError
+    from tactile_sl_common.camera_info import CameraInfoError
+    from tactile_sl_decoder.calibrate.result import CalibrationError
 
     handlers: dict[str, Callable[[argparse.Namespace], int]] = {
         "board": _run_board, "target": _run_target, "simulate": _run_simulate,
@@ -154,7 +155,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _pairs(args: argparse.Namespace) -> Any:
-    from tactile_sl_camera.calibration import iter_bag_pairs, iter_folder_pairs, unpaired_images
+    from tactile_sl_decoder.calibrate.checkerboard import (
+        iter_bag_pairs,
+        iter_folder_pairs,
+        unpaired_images,
+    )
 
     if args.folder:
         alone = unpaired_images(args.folder)
@@ -180,8 +185,8 @@ def _target(args: argparse.Namespace) -> Any:
 
 def _run_board(args: argparse.Namespace) -> int:
     """Checkerboard calibration (the original path)."""
-    from tactile_sl_camera.calibration import calibrate_stereo
-    from tactile_sl_camera.safe_files import check_outputs
+    from tactile_sl_common.safe_files import check_outputs
+    from tactile_sl_decoder.calibrate.checkerboard import calibrate_stereo
 
     check_outputs(args.output, CAMERA_FILES)       # before any work
 
@@ -200,13 +205,13 @@ def _run_board(args: argparse.Namespace) -> int:
 
 def _run_target(args: argparse.Namespace) -> int:
     """Printed-pattern calibration: decode every view, calibrate, report, write."""
-    from tactile_sl_camera.calibration import CalibrationError
-    from tactile_sl_camera.safe_files import check_outputs
+    from tactile_sl_common.safe_files import check_outputs
     from tactile_sl_decoder.calibrate import (
         CalibrationOptions,
         ViewDecoder,
         calibrate_pattern_stereo,
     )
+    from tactile_sl_decoder.calibrate.result import CalibrationError
 
     check_outputs(args.output, CAMERA_FILES + ([] if args.no_coverage else ["coverage.png"]))
     target = _target(args)
@@ -268,20 +273,20 @@ def _run_simulate(args: argparse.Namespace) -> int:
     """Simulated views (pattern with --target, else checkerboards) and the truth."""
     import numpy as np
 
-    from tactile_sl_camera.sim.render import Renderer
     from tactile_sl_decoder.calibrate.simulate import (
         artwork_of,
         random_poses,
         render_pattern_views,
         write_views,
     )
+    from tactile_sl_sim.render import Renderer
 
     out = pathlib.Path(args.output)
     if args.simulate < 1:
         raise ValueError("--simulate needs at least 1 view")
     if args.target is None:
-        from tactile_sl_camera.calibration import simulated_board_views
-        from tactile_sl_camera.sim.artwork import Artwork
+        from tactile_sl_decoder.calibrate.simulate import simulated_board_views
+        from tactile_sl_sim.artwork import Artwork
 
         # the pad artwork is irrelevant for boards: a blank one keeps this independent of it
         blank = Artwork(np.ones((8, 8), np.float32), (3.5, 3.5), 4.0, 0.0005, 1, 1)
@@ -308,8 +313,8 @@ def _run_simulate(args: argparse.Namespace) -> int:
 
 def _untouched(args: argparse.Namespace, bag: str) -> tuple[list[Any], Any, Any]:
     """Decoded untouched frames of a bag, and the calibration to judge (left, right)."""
-    from tactile_sl_camera.camera_info import calibration_from_msg, load_camera_info_yaml
-    from tactile_sl_camera.images import to_gray
+    from tactile_sl_common.camera_info import calibration_from_msg, load_camera_info_yaml
+    from tactile_sl_common.images import to_gray
     from tactile_sl_decoder.calibrate import ViewDecoder
     from tactile_sl_decoder.frames import bag_frames
 
@@ -359,8 +364,8 @@ def _run_check(args: argparse.Namespace) -> int:
 
 def _run_refine(args: argparse.Namespace) -> int:
     """Refine the extrinsics in place; write the refined calibration atomically."""
-    from tactile_sl_camera.camera_info import camera_info_yaml_text
-    from tactile_sl_camera.safe_files import check_outputs, write_files
+    from tactile_sl_common.camera_info import camera_info_yaml_text
+    from tactile_sl_common.safe_files import check_outputs, write_files
     from tactile_sl_decoder.calibrate.health import calibration_health, refine_extrinsics
     from tactile_sl_decoder.stereo.stereo import StereoRig
 
@@ -384,8 +389,8 @@ def _run_refine(args: argparse.Namespace) -> int:
 
 def _run_force(args: argparse.Namespace) -> int:
     """Fit the elastomer to a recording with known loads; write OUT/sensor.yaml."""
-    from tactile_sl_camera.images import to_gray
-    from tactile_sl_camera.safe_files import check_outputs, write_files
+    from tactile_sl_common.images import to_gray
+    from tactile_sl_common.safe_files import check_outputs, write_files
     from tactile_sl_decoder.frames import bag_frames
     from tactile_sl_decoder.glyphs import PipelineInputError
     from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline

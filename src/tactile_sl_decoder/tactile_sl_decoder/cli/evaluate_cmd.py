@@ -86,8 +86,8 @@ def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
         if path is not None:
             raise
         # the shipped pattern must match the shipped artwork; read the values from it
-        from tactile_sl_camera.sim import load_artwork
         from tactile_sl_decoder.tooling.training import DEFAULT_PRIMITIVES, artwork_values
+        from tactile_sl_sim.artwork import load_artwork
 
         print(f"evaluate: warning: shipped pattern unreadable ({exc}); reading cell values "
               "from the simulator artwork instead", file=sys.stderr)
@@ -97,7 +97,7 @@ def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
 
 def symbol_sections(args: argparse.Namespace, bags: list[Path]) -> str:
     """Extraction, classification and confusion tables of every bag, plus JSON."""
-    from tactile_sl_camera.bag_io import BagError
+    from tactile_sl_common.bag_io import BagError
     from tactile_sl_decoder.classify.classifier import Classifier
     from tactile_sl_decoder.tooling.evaluation import (
         aggregate,
@@ -153,7 +153,7 @@ def symbol_sections(args: argparse.Namespace, bags: list[Path]) -> str:
         for t in totals + [overall]:
             out.append(format_confusion(confusion_section(t, names)))
     if args.json:
-        from tactile_sl_camera.safe_files import write_text
+        from tactile_sl_common.safe_files import write_text
 
         write_text(args.json, json.dumps({"images": to_json(all_rows),
                                           "scenes": to_json(totals)}, indent=1))
@@ -216,7 +216,7 @@ def e2e_section(args: argparse.Namespace, bags: list[Path]) -> str:
     format_table(per_bag, file=out)
     json_path = getattr(args, "json", None)
     if json_path:
-        from tactile_sl_camera.safe_files import write_text
+        from tactile_sl_common.safe_files import write_text
 
         target = Path(json_path).with_suffix(".e2e.json")
         write_text(target, json.dumps({
@@ -237,7 +237,7 @@ def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
     """
     from dataclasses import asdict
 
-    from tactile_sl_camera.bag_io import BagError
+    from tactile_sl_common.bag_io import BagError
     from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
     from tactile_sl_decoder.tooling.bag_runs import evaluate_touch_bag
     from tactile_sl_decoder.tooling.slip_metrics import format_slip_report, slip_frames
@@ -286,7 +286,7 @@ def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
             text += f"\n(no touch ground truth, not in the touch figures: {', '.join(skipped)})"
         json_path = getattr(args, "json", None)
         if json_path:
-            from tactile_sl_camera.safe_files import write_text
+            from tactile_sl_common.safe_files import write_text
 
             target = Path(json_path).with_suffix(".touch.json")
             write_text(target, json.dumps({
@@ -313,7 +313,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"evaluate: no such bag: {', '.join(missing)}", file=sys.stderr)
         return 2
     if args.json:     # before any work: an output that cannot be written is said at once
-        from tactile_sl_camera.safe_files import OutputError, check_output
+        from tactile_sl_common.safe_files import OutputError, check_output
 
         try:
             check_output(args.json, args.bags)

@@ -9,7 +9,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from tactile_sl_camera.safe_files import OutputError, check_output, write_text
+from tactile_sl_common.safe_files import OutputError, check_output, write_text
 from tactile_sl_decoder.cli.argtypes import number
 
 from ..pattern import (

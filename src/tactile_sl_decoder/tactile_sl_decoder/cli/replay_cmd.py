@@ -51,10 +51,10 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Replay a bag; exit status 0 on success, 1 on bad input files."""
-    from tactile_sl_camera.bag_io import BagError, BagWriter
-    from tactile_sl_camera.clouds import cloud_fields
-    from tactile_sl_camera.images import ImageFormatError, to_gray
-    from tactile_sl_camera.safe_files import OutputError, check_output, same_file
+    from tactile_sl_common.bag_io import BagError, BagWriter
+    from tactile_sl_common.clouds import cloud_fields
+    from tactile_sl_common.images import ImageFormatError, to_gray
+    from tactile_sl_common.safe_files import OutputError, check_output, same_file
     from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
     from tactile_sl_decoder.decode.codewords import PatternError
     from tactile_sl_decoder.frames import bag_frames, bag_topics
@@ -149,7 +149,7 @@ def _count_input_frames(args: argparse.Namespace, touch: bool) -> int:
     Raises BagError (unreadable, topics missing, no frames) or ValueError (the touch
     reference would take every frame: no touch output could follow).
     """
-    from tactile_sl_camera.bag_io import BagError, BagReader
+    from tactile_sl_common.bag_io import BagError, BagReader
     from tactile_sl_decoder.frames import bag_topics, count_bag_frames
 
     reader = BagReader(args.input)

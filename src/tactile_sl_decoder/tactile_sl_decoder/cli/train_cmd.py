@@ -50,7 +50,7 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Generate data, train, save weights and card; returns the exit status."""
-    from tactile_sl_camera.safe_files import OutputError, atomic_path, check_output, write_text
+    from tactile_sl_common.safe_files import OutputError, atomic_path, check_output, write_text
 
     out = args.output or default_weights_path()
     card = args.card or out.with_name(out.stem + "_card.md")
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"train: cannot write {out}: {exc.strerror or exc}", file=sys.stderr)
         return 1
-    note = (f"Simulator frames (`tactile_sl_camera.sim`, shipped artwork), both cameras: "
+    note = (f"Simulator frames (`tactile_sl_sim`, shipped artwork), both cameras: "
             f"{args.frames} training frames (seed {args.seed}, indenters "
             f"{', '.join(TRAIN_KINDS)}) and {args.val_frames} held-out frames (seed "
             f"{args.seed + 7919}, indenters {', '.join(HELDOUT_KINDS)}); 0-2 indenters per "

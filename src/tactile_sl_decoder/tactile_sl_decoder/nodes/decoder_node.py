@@ -26,10 +26,10 @@ import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-from tactile_sl_camera.clouds import cloud_fields
-from tactile_sl_camera.images import ImageFormatError, to_gray
-from tactile_sl_camera.nodes.camera_common import cloud_msg
-from tactile_sl_camera.nodes.parameters import (
+from tactile_sl_common.clouds import cloud_fields
+from tactile_sl_common.images import ImageFormatError, to_gray
+from tactile_sl_common.nodes.messages import cloud_msg
+from tactile_sl_common.nodes.parameters import (
     FRAME_PREFIX_DOC,
     LiveParameters,
     dataclass_fields,
@@ -37,7 +37,7 @@ from tactile_sl_camera.nodes.parameters import (
     field_docs,
     frame_prefix_check,
 )
-from tactile_sl_camera.nodes.runner import run_node
+from tactile_sl_common.nodes.runner import run_node
 from tactile_sl_decoder.checks import check_classifier, check_threshold, load_pattern_spec
 from tactile_sl_decoder.frames import StereoSync, stamp_ns
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError

@@ -2,7 +2,7 @@
 
 ``symbol_extractor`` declares them bare (``block_size``), the ``decoder`` as
 ``extraction.block_size``; both through the one parameter mechanism
-(:class:`tactile_sl_camera.nodes.parameters.LiveParameters`), with the field docstrings of
+(:class:`tactile_sl_common.nodes.parameters.LiveParameters`), with the field docstrings of
 :class:`~tactile_sl_decoder.extract.extraction.ExtractionParams` as descriptions, the ranges below,
 and live changes (except ``patch_size``, the classifier's input size, read-only).
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Callable
 
-from tactile_sl_camera.nodes.parameters import LiveParameters, dataclass_fields, field_docs
+from tactile_sl_common.nodes.parameters import LiveParameters, dataclass_fields, field_docs
 from tactile_sl_decoder.extract.extraction import ExtractionParams
 
 # Ranges of the extraction parameters (rclpy refuses values outside; more checks below).

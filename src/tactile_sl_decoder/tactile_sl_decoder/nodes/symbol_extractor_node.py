@@ -21,9 +21,9 @@ import cv2
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 
-from tactile_sl_camera.images import ImageFormatError, to_gray
-from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
-from tactile_sl_camera.nodes.runner import run_node
+from tactile_sl_common.images import ImageFormatError, to_gray
+from tactile_sl_common.nodes.parameters import LiveParameters, declare_qos
+from tactile_sl_common.nodes.runner import run_node
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.frames import StampThrottle, stamp_ns
 from tactile_sl_decoder.glyphs import Glyphs

@@ -21,8 +21,8 @@ from std_msgs.msg import ColorRGBA
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from tactile_sl_camera.nodes.camera_common import apply_header, cloud_msg, image_msg
-from tactile_sl_camera.nodes.parameters import declare_qos
+from tactile_sl_common.nodes.messages import apply_header, cloud_msg, image_msg
+from tactile_sl_common.nodes.parameters import declare_qos
 from tactile_sl_decoder.touch.messages import (
     contact_fields,
     depth_fields,

@@ -218,6 +218,6 @@ def dump_pattern(pattern: Pattern) -> str:
 
 def save_pattern(pattern: Pattern, path: str | Path) -> None:
     """Write the pattern file (the array rows as quoted strings, one per line), atomically."""
-    from tactile_sl_camera.safe_files import write_text
+    from tactile_sl_common.safe_files import write_text
 
     write_text(path, dump_pattern(pattern))

@@ -19,7 +19,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from tactile_sl_camera.camera_info import CameraCalibration, CameraInfoError, calibration_from_msg
+from tactile_sl_common.camera_info import CameraCalibration, CameraInfoError, calibration_from_msg
 
 UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-12)
 

@@ -143,7 +143,7 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
 def _process(pipeline: Any, frame: Any, on_skip: SkipCallback | None,
              label_hook: Callable | None = None) -> Any:
     """The pipeline's result for a bag frame, or None (after ``on_skip``) if its input is bad."""
-    from tactile_sl_camera.images import to_gray
+    from tactile_sl_common.images import to_gray
 
     try:
         if frame.left_info is None or frame.right_info is None:

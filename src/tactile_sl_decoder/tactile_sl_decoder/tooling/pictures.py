@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_sl_camera.clouds import cloud_to_arrays
+from tactile_sl_common.clouds import cloud_to_arrays
 
 # ---------------------------------------------------------------------- camera images, clouds
 

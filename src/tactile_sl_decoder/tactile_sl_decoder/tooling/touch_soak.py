@@ -32,7 +32,7 @@ def write_phase_bag(source: str | Path, out: str | Path, untouched: Sequence[int
     pressed one through ``pressed``.  Every frame gets a new stamp, ``period_s`` apart from
     the first frame's stamp (log time = stamp).  Returns the number of frames written.
     """
-    from tactile_sl_camera.bag_io import BagError, BagReader, BagWriter, restamp_cdr
+    from tactile_sl_common.bag_io import BagError, BagReader, BagWriter, restamp_cdr
 
     reader = BagReader(source)
     frames: dict[int, list] = {}

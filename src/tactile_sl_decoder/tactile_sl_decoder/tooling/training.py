@@ -1,6 +1,6 @@
 """Training data from the simulator and training of the glyph classifier (torch, CPU).
 
-Data: stereo frames rendered by :mod:`tactile_sl_camera.sim` under random indenters, depths,
+Data: stereo frames rendered by :mod:`tactile_sl_sim` under random indenters, depths,
 positions, shear and nuisances (blur, noise, vignetting, uneven light, gamma, exposure,
 shadows), most of them also with the nuisances of real sensors (:func:`sensor_nuisances`:
 an object seen through the pad, MJPEG, defocus, motion blur, unequal exposure, a damaged
@@ -139,7 +139,8 @@ def random_scene(rng: np.random.Generator, kinds: tuple[str, ...]
     frames also those of real sensors (:func:`sensor_nuisances`) and a spacing drawn from
     ``TRAIN_SPACINGS_PX`` (else the sensor's 18 px).
     """
-    from tactile_sl_camera.sim import Contact, Nuisances
+    from tactile_sl_sim.contact import Contact
+    from tactile_sl_sim.render import Nuisances
 
     contacts = []
     for _ in range(int(rng.choice([0, 1, 1, 1, 2]))):
@@ -223,8 +224,9 @@ def render_dataset(frames: int, seed: int, kinds: tuple[str, ...], values: np.nd
                    artwork: str | None = None, params: ExtractionParams | None = None,
                    progress: Callable[[int, str], None] | None = None) -> PatchSet:
     """Patches labelled from ``frames`` simulated stereo frames (both cameras)."""
-    from tactile_sl_camera.sim import Renderer, load_artwork
-    from tactile_sl_camera.sim.optics import RigParams, SimulatedCameraPair
+    from tactile_sl_sim.artwork import load_artwork
+    from tactile_sl_sim.optics import RigParams, SimulatedCameraPair
+    from tactile_sl_sim.render import Renderer
 
     art = load_artwork(artwork)
     if values is None:

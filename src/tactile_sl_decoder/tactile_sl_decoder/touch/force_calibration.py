@@ -23,7 +23,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from tactile_sl_camera.elasticity import Elastomer
+from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_decoder.touch.sensor import SensorConfig, read_yaml_file
 from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
 

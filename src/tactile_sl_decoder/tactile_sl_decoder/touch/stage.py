@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_sl_camera.elasticity import check_layer_resolved
+from tactile_sl_common.elasticity import check_layer_resolved
 from tactile_sl_decoder.touch.contact import (
     ContactParams,
     ContactState,
