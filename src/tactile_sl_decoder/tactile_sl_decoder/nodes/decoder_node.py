@@ -11,9 +11,9 @@ the left image), the touch outputs ``field``, ``wrench``, ``contact``, ``depth``
 (with ``slip_markers`` for RViz) and ``pad_pose`` (see :mod:`.touch_outputs`; service
 ``tare``) and, for inspection, ``left/symbols_decoded`` / ``right/symbols_decoded``
 (labelled and decoded SymbolArrays).
-All the work is done by the shared :class:`~tactile_sl_decoder.pipeline.StereoPipeline`,
-so ``tactile-sl replay`` on a bag gives
-the same points.  Bad input (encodings, sizes, CameraInfo, unsynchronised stereo, empty
+All the work is done by the shared :class:`~tactile_sl_decoder.sensor_step.SensorStep`
+(pipeline, touch stage, tare policy), so ``tactile-sl replay`` on a bag gives the same points
+and touch outputs.  Bad input (encodings, sizes, CameraInfo, unsynchronised stereo, empty
 images) is reported with a throttled warning and the frame is skipped; the node keeps
 running.  Parameters: see ``config/decoder.yaml`` and ``docs/decoder.md``.
 """
@@ -44,8 +44,9 @@ from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.nodes.diagnostics import DecoderDiagnostics, DiagnosticLimits, Status
 from tactile_sl_decoder.nodes.diagnostics_publisher import DiagnosticsPublisher
 from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
-from tactile_sl_decoder.nodes.touch_outputs import TouchOutputs
+from tactile_sl_decoder.nodes.touch_outputs import CATCH_UP_BURST, TouchOutputs, declare_touch
 from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline, StereoResult
+from tactile_sl_decoder.sensor_step import SensorStep
 from tactile_sl_decoder.symbol_array import fill_message, from_message
 
 try:
@@ -149,6 +150,10 @@ class DecoderNode(Node):
         if self.input_mode == "images":    # fail at start, not on the first frame
             check_classifier(self.pipeline.load_classifier(), pattern.symbols,
                              weights or "(shipped)")
+        touch = declare_touch(self.params)
+        # the reference is prepared in a worker thread: images keep flowing meanwhile
+        self.step = SensorStep(self.pipeline, touch.sensor, touch.params, background=True,
+                               catch_up=CATCH_UP_BURST)
         self.sync = StereoSync(int(sync_slop * 1e9), queue_size, int(self._max_wait_s * 1e9))
         self._last_warn: dict[str, float] = {}
         self.info: dict[str, Any] = {"left": None, "right": None}
@@ -165,8 +170,9 @@ class DecoderNode(Node):
         out_qos = declare_qos(self.params, "output", "points, left|right/symbols_decoded and "
                               "the touch outputs field, wrench, contact, depth, slip", 5)
         self.pub_points = self.create_publisher(PointCloud2, "points", out_qos)
-        self.touch = TouchOutputs(self, pattern.array.shape, pattern.pitch_m,
-                                  params.decode.mirrored, out_qos)
+        self.touch = (None if self.step.touch is None else
+                      TouchOutputs(self, self.params, self.step.touch, self.frame_prefix,
+                                   out_qos))
         self.pub_sym = {}
         if self.publish_symbols and SymbolArray is not None:
             for side in ("left", "right"):
@@ -208,7 +214,7 @@ class DecoderNode(Node):
 
     def destroy_node(self) -> None:
         """Stop the pipeline's worker threads before the node goes."""
-        self.pipeline.close()
+        self.step.close()
         super().destroy_node()
 
     def _extraction_params(self) -> Any:
@@ -334,8 +340,9 @@ class DecoderNode(Node):
             classifier.threshold = float(stored if threshold is None else threshold)
 
     def _set_mirrored(self, value: bool) -> None:
-        self.pipeline.params.decode.mirrored = bool(value)
-        self.touch.restart(mirrored=bool(value))
+        self.step.set_mirrored(bool(value))
+        if self.touch is not None:
+            self.touch.restarted()
         self._health_pending = True
 
     # ------------------------------------------------------------------ callbacks
@@ -394,35 +401,37 @@ class DecoderNode(Node):
     def _process(self, left_msg: Any, right_msg: Any) -> None:
         t0 = time.perf_counter()
         stamp = (int(left_msg.header.stamp.sec), int(left_msg.header.stamp.nanosec))
+        camera_frame = str(left_msg.header.frame_id)
+        decoded = []       # set once the frame's points exist: later errors are not its input
+
+        def on_points(result: StereoResult) -> None:
+            decoded.append(True)
+            self._publish_points(result, stamp, camera_frame)
+
         try:
             if self.info["left"] is None or self.info["right"] is None:
                 missing = [f"{s}/camera_info" for s in ("left", "right") if self.info[s] is None]
                 raise PipelineInputError(f"no CameraInfo received yet on {', '.join(missing)}")
             if self.input_mode == "images":
-                result = self.pipeline.process(to_gray(left_msg), to_gray(right_msg),
-                                               self.info["left"], self.info["right"])
+                out = self.step.process(to_gray(left_msg), to_gray(right_msg),
+                                        self.info["left"], self.info["right"], tag=stamp,
+                                        camera_frame=camera_frame, on_points=on_points)
             else:
-                result = self.pipeline.process_symbols(
+                out = self.step.process_symbols(
                     from_message(left_msg), from_message(right_msg),
-                    self.info["left"], self.info["right"])
+                    self.info["left"], self.info["right"], tag=stamp,
+                    camera_frame=camera_frame, on_points=on_points)
         except (PipelineInputError, ImageFormatError, ValueError) as exc:
+            if decoded:
+                raise
             self.stats["skipped"] += 1
             self.diag.skipped(str(exc))
             kind = type(exc).__name__ + str(exc).split(":")[0][:40]
             self.warn(kind, f"frame {stamp[0]}.{stamp[1]:09d} skipped: {exc}")
             return
-        self.stats["frames"] += 1
-        self.stats["points"] += len(result.points)
-        if len(result.points) == 0 and min(len(result.left), len(result.right)) >= 50:
-            self.warn("nothing-decoded",
-                      f"frame {stamp[0]}.{stamp[1]:09d}: {len(result.left)} + "
-                      f"{len(result.right)} glyphs found but no cell decoded in both images; "
-                      f"check pattern_file (is it the printed pattern?) and mirrored")
-        if len(result.points) or self.publish_empty:
-            frame_id = result.frame_id or str(left_msg.header.frame_id)
-            self.pub_points.publish(cloud_msg(cloud_fields(result.points, stamp, frame_id)))
-        self.touch.process(result.points, stamp,
-                           result.frame_id or str(left_msg.header.frame_id))
+        result = out.stereo
+        if self.touch is not None:
+            self.touch.publish_frame(out.touch, stamp)
         if self.pub_sym:
             for side, glyphs, src in (("left", result.left, left_msg),
                                       ("right", result.right, right_msg)):
@@ -434,11 +443,27 @@ class DecoderNode(Node):
         latency_s = (self.get_clock().now().nanoseconds - stamp_ns(left_msg.header)) * 1e-9
         self.diag.frame(proc_s, latency_s, result.left, result.right, len(result.points),
                         result.rejected_pairs, result.assisted)
-        if self.touch.enabled and self.touch.tares != self._tares_seen:
+        if self.touch is not None and self.touch.tares != self._tares_seen:
             self._tares_seen = self.touch.tares
             self._health_pending = True
         if self._health_pending:
             self._check_calibration(result)
+
+    def _publish_points(self, result: StereoResult, stamp: tuple[int, int],
+                        camera_frame: str) -> None:
+        """The frame's cloud, as soon as it exists (before the touch stage runs)."""
+        self.stats["frames"] += 1
+        self.stats["points"] += len(result.points)
+        if len(result.points) == 0 and min(len(result.left), len(result.right)) >= 50:
+            self.warn("nothing-decoded",
+                      f"frame {stamp[0]}.{stamp[1]:09d}: {len(result.left)} + "
+                      f"{len(result.right)} glyphs found but no cell decoded in both images; "
+                      f"check pattern_file (is it the printed pattern?) and mirrored")
+        if len(result.points) or self.publish_empty:
+            frame_id = result.frame_id or camera_frame
+            self.pub_points.publish(cloud_msg(cloud_fields(result.points, stamp, frame_id)))
+        if self.touch is not None:
+            self.touch.before_frame()
 
     def _check_calibration(self, result: StereoResult) -> None:
         """Calibration health on this (untouched) frame; logged, kept for /diagnostics."""
@@ -467,16 +492,17 @@ class DecoderNode(Node):
 
     def _diagnostic_statuses(self) -> list[Status]:
         t = self.touch
-        if t.enabled:
-            ref = t.stage.reference
+        if t is not None:
+            stage = t.driver.stage
+            ref = stage.reference
             pose = ref.pose if ref is not None else None
             self.diag.touch_state(
-                True, ref is not None, t.stage.params.reference_frames,
+                True, ref is not None, stage.params.reference_frames,
                 len(ref.cells) if ref is not None else 0,
                 pose.residual_rms if pose is not None else float("nan"),
                 pose.residual_max if pose is not None else float("nan"),
-                t.tares, t.last_tare, t.stage.preparing, t.stage.pending,
-                t.stage.pending_dropped)
+                t.tares, t.last_tare, stage.preparing, stage.pending,
+                stage.pending_dropped)
         else:
             self.diag.touch_state(False)
         return self.diag.statuses(time.monotonic())
