@@ -26,13 +26,9 @@ from tactile_sl_common.camera_info import (
 )
 from tactile_sl_common.images import image_fields
 from tactile_sl_common.nodes.messages import camera_info_msg, image_msg
-from tactile_sl_common.nodes.parameters import (
-    FRAME_PREFIX_DOC,
-    LiveParameters,
-    declare_qos,
-    frame_prefix_check,
-)
+from tactile_sl_common.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_common.nodes.runner import run_node
+from tactile_sl_common.settings import FRAME_PREFIX_DOC, frame_prefix_check
 
 
 class StereoCameraNode(Node):

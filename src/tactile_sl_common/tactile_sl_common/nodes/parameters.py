@@ -4,20 +4,21 @@ Every parameter is declared with a :class:`~rcl_interfaces.msg.ParameterDescript
 its description, its range (``FloatingPointRange`` / ``IntegerRange``) and ``read_only``
 for what only applies at start (QoS, files, thread counts), so ``ros2 param describe``
 tells the truth and rclpy itself refuses an out-of-range value or a change to a start-only
-setting, with its reason.  What can change while running goes through one
-on-set-parameters callback (:class:`LiveParameters`): every new value of a request is first
-checked by its validator, then all are applied together, or the request is refused with the
-reason; a parameter that is neither read-only nor live cannot be declared.
+setting, with its reason.  What can change while running goes through
+:class:`LiveParameters`, in two steps as rclpy intends (demo_nodes_py's
+``set_parameters_callback``): the on-set callback only *validates* every new value of a
+request (its own check, and the settings dataclass it belongs to as it would be after the
+change) and refuses the whole request with the reason; the post-set callback *applies* the
+accepted values, so a refusal never leaves a request half applied.  A parameter that is
+neither read-only nor live cannot be declared.
 
-Descriptions of dataclass fields come from the field's docstring (:func:`field_docs`), so a
-params dataclass documents its node parameters once.
+A settings dataclass is declared from its table (:meth:`LiveParameters.declare_table`,
+:class:`tactile_sl_common.settings.SettingsTable`): the same ranges its ``validate()``
+reads, descriptions from the field docstrings.
 """
 from __future__ import annotations
 
-import ast
 import dataclasses
-import inspect
-import textwrap
 from typing import Any, Callable
 
 from rcl_interfaces.msg import (
@@ -27,6 +28,8 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from tactile_sl_common.settings import SettingsTable
 
 Apply = Callable[[Any], None]
 Check = Callable[[Any], "str | None"]
@@ -46,30 +49,39 @@ def descriptor(description: str, value_range: tuple[float, float] | None = None,
     return d
 
 
-def field_docs(cls: type) -> dict[str, str]:
-    """The docstrings written under the fields of a dataclass (one line each, joined)."""
-    try:
-        tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
-    except (OSError, TypeError, SyntaxError):
-        return {}
-    body = tree.body[0].body if tree.body and isinstance(tree.body[0], ast.ClassDef) else []
-    docs: dict[str, str] = {}
-    for node, nxt in zip(body, body[1:]):
-        if (isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name)
-                and isinstance(nxt, ast.Expr) and isinstance(nxt.value, ast.Constant)
-                and isinstance(nxt.value.value, str)):
-            docs[node.target.id] = " ".join(nxt.value.value.split())
-    return docs
+@dataclasses.dataclass
+class _TableGroup:
+    """The live parameters of one declared table: parameter name -> field, how to validate."""
+
+    table: SettingsTable
+    prefix: str
+    fields: dict[str, str]
+    current: Callable[[], Any]     # the settings object as it is now
+
+    def validate(self, changes: dict[str, Any]) -> str | None:
+        """Why the settings would be refused after ``changes`` (field -> value), or None."""
+        now = self.current()
+        after = dataclasses.replace(now, **{f: type(getattr(now, f))(v)
+                                            for f, v in changes.items()})
+        try:
+            if hasattr(after, "validate"):
+                after.validate()
+            else:
+                self.table.check(after, self.prefix)
+        except ValueError as exc:
+            return str(exc)
+        return None
 
 
 class LiveParameters:
-    """Declares a node's parameters and applies live changes through one callback."""
+    """Declares a node's parameters; validates live changes on set, applies them after."""
 
     def __init__(self, node: Any) -> None:
         self.node = node
         self._live: dict[str, tuple[Check | None, Apply]] = {}
-        self._group_checks: list[Callable[[dict[str, Any]], str | None]] = []
+        self._tables: list[_TableGroup] = []
         node.add_on_set_parameters_callback(self._on_set)
+        node.add_post_set_parameters_callback(self._post_set)
 
     def declare(self, name: str, default: Any, description: str,
                 value_range: tuple[float, float] | None = None, read_only: bool = False,
@@ -81,10 +93,7 @@ class LiveParameters:
         """
         if apply is None and not read_only:
             raise TypeError(f"parameter {name}: give apply= (live) or read_only=True")
-        if apply is not None:
-            how = ""
-        else:
-            how = " Applies at start only (read-only)."
+        how = "" if apply is not None else " Applies at start only (read-only)."
         self.node.declare_parameter(name, default, descriptor(description + how, value_range,
                                                               default, read_only))
         value = self.node.get_parameter(name).value
@@ -96,11 +105,40 @@ class LiveParameters:
             self._live[name] = (check, apply)
         return value
 
-    def check_together(self, check: Callable[[dict[str, Any]], str | None]) -> None:
-        """A check over several parameters: gets {name: new or current value}."""
-        self._group_checks.append(check)
+    def declare_table(self, table: SettingsTable, settings: Any, prefix: str = "",
+                      what: str = "", apply: Callable[[str, Any], None] | None = None,
+                      current: Callable[[], Any] | None = None) -> Any:
+        """Declare ``<prefix><field>`` for every row of ``table``; return ``settings``.
+
+        ``settings`` (an instance of the table's dataclass) gives the defaults and takes the
+        values given at start.  A live change is validated as the settings would be after
+        it (the dataclass's ``validate()``, else the table's ranges and checks) and then
+        applied: ``apply(field, value)``, by default written into ``settings``; give
+        ``current`` when ``apply`` replaces the object (it returns the one in use).
+        ``what`` prefixes every description.
+        """
+        group = _TableGroup(table, prefix, {}, current or (lambda: settings))
+        for row in table:
+            kind = type(row.default)
+            if row.live:
+                def write(value: Any, field: str = row.name, kind: type = kind) -> None:
+                    if apply is not None:
+                        apply(field, kind(value))
+                    else:
+                        setattr(settings, field, kind(value))
+                extra: dict[str, Any] = {"apply": write, "check": row.check}
+                group.fields[prefix + row.name] = row.name
+            else:
+                extra = {"read_only": True, "check": row.check}
+            value = self.declare(prefix + row.name, getattr(settings, row.name),
+                                 what + row.description, row.range, **extra)
+            setattr(settings, row.name, kind(value))
+        if group.fields:
+            self._tables.append(group)
+        return settings
 
     def _on_set(self, params: list[Any]) -> SetParametersResult:
+        """Validate a request: every value, then every settings object as it would become."""
         changes = {p.name: p.value for p in params}
         for name, value in changes.items():
             if name not in self._live:
@@ -109,37 +147,23 @@ class LiveParameters:
             reason = check(value) if check is not None else None
             if reason:
                 return SetParametersResult(successful=False, reason=f"{name}: {reason}")
-        for group in self._group_checks:
-            current = {n: (changes[n] if n in changes else self.node.get_parameter(n).value)
-                       for n in self._live}
-            reason = group(current)
+        for group in self._tables:
+            touched = {field: changes[name] for name, field in group.fields.items()
+                       if name in changes}
+            reason = group.validate(touched) if touched else None
             if reason:
                 return SetParametersResult(successful=False, reason=reason)
-        applied = []
-        for name, value in changes.items():
-            if name in self._live:
-                self._live[name][1](value)
-                applied.append(f"{name}={value!r}")
-        if applied:
-            self.node.get_logger().info(f"parameters applied: {', '.join(applied)}")
         return SetParametersResult(successful=True)
 
-
-def dataclass_fields(obj: Any) -> list[tuple[str, Any]]:
-    """(name, default) of the scalar fields of a dataclass instance."""
-    return [(f.name, getattr(obj, f.name)) for f in dataclasses.fields(obj)
-            if isinstance(getattr(obj, f.name), (bool, int, float, str))]
-
-
-FRAME_PREFIX_DOC = ("Prepended to every frame id this node publishes (e.g. 'left_hand_'), so "
-                    "several sensors on one robot have distinct frames; empty = none.")
-
-
-def frame_prefix_check(prefix: str) -> str | None:
-    """Why ``prefix`` cannot start frame ids (None when it can)."""
-    if prefix.startswith("/") or any(c.isspace() for c in prefix):
-        return "a frame id prefix has no leading '/' and no spaces (REP 105 frame names)"
-    return None
+    def _post_set(self, params: list[Any]) -> None:
+        """Apply what :meth:`_on_set` accepted (also called for declarations: skipped)."""
+        applied = []
+        for p in params:
+            if p.name in self._live:
+                self._live[p.name][1](p.value)
+                applied.append(f"{p.name}={p.value!r}")
+        if applied:
+            self.node.get_logger().info(f"parameters applied: {', '.join(applied)}")
 
 
 RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}

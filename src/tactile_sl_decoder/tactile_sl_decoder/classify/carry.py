@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.neighbours import nearest_within
 
@@ -44,25 +45,31 @@ class CarryParams:
     """When a glyph keeps the label of the glyph at its place in the previous frame."""
 
     enabled: bool = True
-    radius: float = 0.3           # x glyph spacing, around the predicted position
-    min_correlation: float = 0.93  # patch correlation with the previous glyph's patch
-    min_confidence: float = 0.9   # the previous label's confidence
-    refresh_frames: int = 8       # classified again after at most this many carried frames
-    cells: bool = True            # cells too, when this frame's lattice confirms all of them
+    """A glyph where a glyph was one frame earlier, looking the same, keeps its label instead
+    of being classified again (off: every glyph is classified every frame)."""
+    radius: float = 0.3
+    """Largest distance from the previous glyph's predicted position, in glyph spacings."""
+    min_correlation: float = 0.93
+    """Smallest correlation of the two glyph patches."""
+    min_confidence: float = 0.9
+    """Smallest confidence of the label carried."""
+    refresh_frames: int = 8
+    """Every glyph is classified again after at most this many frames, and every frame
+    decoded in full after at most this many."""
+    cells: bool = True
+    """Cells too: when this frame's lattice and labels confirm the cell of every glyph
+    matched to the previous frame, the window search is skipped."""
 
     def validate(self) -> "CarryParams":
-        """Raise ValueError for settings outside their ranges."""
-        if not 0.0 < self.radius <= 0.5:
-            raise ValueError(f"carry radius must be in (0, 0.5] spacings, got {self.radius}")
-        if not -1.0 <= self.min_correlation <= 1.0:
-            raise ValueError(f"carry min_correlation must be in [-1, 1], got "
-                             f"{self.min_correlation}")
-        if not 0.0 <= self.min_confidence <= 1.0:
-            raise ValueError(f"carry min_confidence must be in [0, 1], got "
-                             f"{self.min_confidence}")
-        if self.refresh_frames < 1:
-            raise ValueError(f"carry refresh_frames must be >= 1, got {self.refresh_frames}")
+        """Raise ValueError naming the first setting outside :data:`CARRY_SETTINGS`."""
+        CARRY_SETTINGS.check(self, "carry.")
         return self
+
+
+CARRY_SETTINGS = SettingsTable(CarryParams, ranges={
+    "radius": (0.05, 0.5), "min_correlation": (0.5, 1.0), "min_confidence": (0.0, 1.0),
+    "refresh_frames": (1, 1000)})
+"""The decoder node's live ``carry.<field>`` parameters."""
 
 
 def normalised_patches(patches: np.ndarray) -> np.ndarray:

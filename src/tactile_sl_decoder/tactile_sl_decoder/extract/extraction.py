@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.extract.centroid import closing_background, patch_centroid_offset
 from tactile_sl_decoder.extract.spacing import estimate_spacing, median
@@ -117,6 +118,30 @@ class ExtractionParams:
     """Inside those regions, split the parts that are still linked (glyphs joined by the
     stripes of a striped object seen through the pad) by Otsu's threshold of each part's
     ink ratio: the printed ink is darker than anything seen through the pad."""
+
+    def validate(self) -> "ExtractionParams":
+        """Raise ValueError naming the first setting outside :data:`EXTRACTION_SETTINGS`."""
+        EXTRACTION_SETTINGS.check(self)
+        return self
+
+
+def _odd(value: int) -> str | None:
+    return None if int(value) % 2 else "must be odd (adaptive threshold window)"
+
+
+EXTRACTION_SETTINGS = SettingsTable(ExtractionParams, ranges={
+    "block_size": (3, 1001), "offset": (-255.0, 255.0), "open_size": (0, 51),
+    "min_area_px": (0.0, 1e6), "min_area_ratio": (0.0, 100.0), "split_ratio": (1.0, 100.0),
+    "triple_ratio": (1.0, 100.0), "max_area_ratio": (1.0, 1000.0),
+    "split_iterations": (0, 100), "min_split_distance": (0.0, 10.0),
+    "core_radius": (0.0, 10.0), "min_core_fill": (0.0, 1.0), "patch_size": (4, 256),
+    "patch_span": (0.1, 10.0), "default_spacing_px": (1.0, 10000.0),
+    "large_offset": (-255.0, 255.0), "refine_split": (0, 5),
+    "split_centroid_radius": (0.05, 0.5), "centroid_level": (0.0, 1.0),
+    "centroid_plane_misfit": (0.0, 10.0), "centroid_background_step": (0.0, 10.0),
+}, read_only=("patch_size",), checks={"block_size": _odd})
+"""Every field is a node parameter (``symbol_extractor``: bare, ``decoder``:
+``extraction.<field>``); ``patch_size`` is the classifier's input size, set at start only."""
 
 
 @dataclass

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_sl_common.settings import SettingsTable, scalar_fields
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.touch.reference import RESIDUAL_WARN_M, residual_warning
 
@@ -62,6 +63,11 @@ class DiagnosticLimits:
     calibration_error_factor: float = 3.0
     """A calibration health figure beyond this multiple of its limit: ERROR (beyond the
     limit itself: WARN)."""
+
+
+DIAGNOSTIC_SETTINGS = SettingsTable(DiagnosticLimits, ranges={
+    name: (0.0, 1e6) for name in scalar_fields(DiagnosticLimits)})
+"""The decoder node's live ``diagnostics.<field>`` parameters."""
 
 
 @dataclass

@@ -12,7 +12,6 @@ the node's :class:`~tactile_sl_decoder.sensor_step.SensorStep` (its
 from __future__ import annotations
 
 import array
-from dataclasses import dataclass
 from typing import Any
 
 from geometry_msgs.msg import Point, PoseStamped, Vector3, WrenchStamped
@@ -36,8 +35,7 @@ from tactile_sl_decoder.touch.messages import (
     wrench_fields,
 )
 from tactile_sl_decoder.touch.reference import residual_warning
-from tactile_sl_decoder.touch.sensor import SensorConfig, load_sensor
-from tactile_sl_decoder.touch.stage import TouchParams, TouchResult
+from tactile_sl_decoder.touch.stage import TouchResult
 
 try:
     from tactile_sl_msgs.msg import Contact, Slip
@@ -53,13 +51,6 @@ except ImportError:
 
 CATCH_UP_BURST = 3
 """Frames of a reference's backlog published per wake-up (see TouchOutputs.publish)."""
-
-
-def _hysteresis(values: dict[str, Any]) -> str | None:
-    on, off = values.get("contact_force_on"), values.get("contact_force_off")
-    if on is not None and off is not None and off > on:
-        return f"contact_force_off ({off}) must not exceed contact_force_on ({on})"
-    return None
 
 
 def _vec(cls: Any, d: dict[str, float]) -> Any:
@@ -133,77 +124,6 @@ def pose_msg(fields: dict[str, Any]) -> PoseStamped:
     msg.pose.orientation.x, msg.pose.orientation.y = o["x"], o["y"]
     msg.pose.orientation.z, msg.pose.orientation.w = o["z"], o["w"]
     return msg
-
-
-@dataclass
-class TouchSetup:
-    """The touch parameters read at start: on or off, the sensor, the stage's settings."""
-
-    enabled: bool
-    sensor: SensorConfig | None       # None when touch outputs are off
-    params: TouchParams               # live changes are written into this very object
-
-
-def declare_touch(live: LiveParameters) -> TouchSetup:
-    """Declare the touch parameters; load the sensor file (with its overrides) if touch is on.
-
-    The live contact thresholds and ``tare_max_depth`` are written into the returned
-    :class:`TouchParams`, which the touch stage keeps (also across a restart), so a change
-    applies from the next frame.
-    """
-    ref = " The reference is taken with it."
-    enabled = live.declare("touch", True, "Publish field, wrench, contact, depth, slip "
-                           "and pad_pose (needs an untouched pad at start: the "
-                           "reference).", read_only=True)
-    sensor_file = live.declare("sensor_file", "", "Sensor YAML (elastomer, pad frame); "
-                               "empty = the shipped one.", read_only=True)
-    reference_frames = live.declare(
-        "reference_frames", 1, "Decoded frames averaged into the untouched reference (at "
-        "start and after each tare)." + ref, (1, 1000), read_only=True)
-    youngs = live.declare("elastomer.youngs_modulus", -1.0, "Pa; overrides the sensor "
-                          "file (< 0 = the file's value)." + ref, (-1.0, 1e12),
-                          read_only=True)
-    poisson = live.declare("elastomer.poisson_ratio", -1.0, "Overrides the sensor file "
-                           "(< 0 = the file's value), 0..0.5." + ref, (-1.0, 0.5),
-                           read_only=True)
-    thickness = live.declare("elastomer.thickness", -1.0, "m, layer bonded to a rigid "
-                             "window, 0 = half-space; overrides the sensor file (< 0 = "
-                             "the file's value)." + ref, (-1.0, 1.0), read_only=True)
-    pad_frame = live.declare("pad_frame", "", "Frame id of the touch outputs; empty = "
-                             "the sensor file's.", read_only=True)
-    params = TouchParams(reference_frames=int(reference_frames))
-    force_on = live.declare("contact_force_on", params.contact.force_on,
-                            "N: in_contact turns on above this normal force",
-                            (1e-4, 100.0),
-                            apply=lambda v: setattr(params.contact, "force_on", float(v)))
-    force_off = live.declare("contact_force_off", params.contact.force_off,
-                             "N: in_contact turns off below this normal force "
-                             "(hysteresis; <= contact_force_on)", (1e-4, 100.0),
-                             apply=lambda v: setattr(params.contact, "force_off", float(v)))
-    tare_max_depth = live.declare(
-        "tare_max_depth", params.tare_max_depth, "m: a tare is refused while the pad is "
-        "pressed in deeper than this (or in contact)", (1e-7, 0.01),
-        apply=lambda v: setattr(params, "tare_max_depth", float(v)))
-    max_pending = live.declare(
-        "max_pending_frames", params.max_pending_frames, "Frames kept while a new "
-        "reference is prepared in the background (about 1-2 s at start, or after a tare "
-        "that changes the reference's cells); they get their touch outputs, late, once it "
-        "is ready. Beyond this many the oldest are dropped (counted in diagnostics).",
-        (0, 100000), read_only=True)
-    live.check_together(_hysteresis)
-    params.contact.force_on = float(force_on)
-    params.contact.force_off = float(force_off)
-    params.tare_max_depth = float(tare_max_depth)
-    params.max_pending_frames = int(max_pending)
-    if not enabled:
-        return TouchSetup(False, None, params)
-
-    def override(value: float) -> float | None:
-        return None if float(value) < 0 else float(value)
-
-    sensor = load_sensor(str(sensor_file) or None).with_overrides(
-        override(youngs), override(poisson), override(thickness), str(pad_frame) or None)
-    return TouchSetup(True, sensor, params)
 
 
 class TouchOutputs:

@@ -43,6 +43,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.stereo.transfer import cell_table, predict_missing
@@ -53,6 +54,8 @@ class RescueParams:
     """Settings of :func:`rescue_pair` (the decoder node's ``rescue.*`` parameters)."""
 
     enabled: bool = True
+    """A cell the other image decoded where this image found no glyph is measured in this
+    image where the neighbouring cells put it."""
     radius: float = 0.2
     """Largest move of the measured centre from the prediction, and largest spread of the
     neighbours' offsets, glyph spacings."""
@@ -66,22 +69,18 @@ class RescueParams:
     centroid_passes: int = 3
     """Centroid passes (each re-samples the patch around the last centre)."""
     grow_passes: int = 8
-    """Growth passes (each can measure cells next to those the last one measured)."""
+    """Growth passes (each can measure cells next to those the last one measured; 0 = off)."""
 
-    def validate(self) -> None:
-        """ValueError naming the setting that is out of range."""
-        if not 0.01 <= self.radius <= 0.45:
-            raise ValueError("rescue.radius must be in [0.01, 0.45] glyph spacings")
-        if not 0.1 <= self.clearance <= 1.0:
-            raise ValueError("rescue.clearance must be in [0.1, 1] glyph spacings")
-        if not 1 <= int(self.min_neighbours) <= 8:
-            raise ValueError("rescue.min_neighbours must be in 1..8")
-        if not 0.0 <= self.min_contrast <= 2.0:
-            raise ValueError("rescue.min_contrast must be in [0, 2]")
-        if not 1 <= int(self.centroid_passes) <= 10:
-            raise ValueError("rescue.centroid_passes must be in 1..10")
-        if not 0 <= int(self.grow_passes) <= 64:
-            raise ValueError("rescue.grow_passes must be in 0..64")
+    def validate(self) -> "RescueParams":
+        """Raise ValueError naming the first setting outside :data:`RESCUE_SETTINGS`."""
+        RESCUE_SETTINGS.check(self, "rescue.")
+        return self
+
+
+RESCUE_SETTINGS = SettingsTable(RescueParams, ranges={
+    "radius": (0.01, 0.45), "clearance": (0.1, 1.0), "min_neighbours": (1, 8),
+    "min_contrast": (0.0, 2.0), "centroid_passes": (1, 10), "grow_passes": (0, 64)})
+"""The decoder node's live ``rescue.<field>`` parameters."""
 
 
 @dataclass

@@ -16,13 +16,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from tactile_sl_common.nodes.messages import camera_info_msg, cloud_msg, image_msg
-from tactile_sl_common.nodes.parameters import (
-    FRAME_PREFIX_DOC,
-    LiveParameters,
-    declare_qos,
-    frame_prefix_check,
-)
+from tactile_sl_common.nodes.parameters import LiveParameters, declare_qos
 from tactile_sl_common.nodes.runner import run_node
+from tactile_sl_common.settings import FRAME_PREFIX_DOC, frame_prefix_check
 from tactile_sl_sim.artwork import ArtworkError
 from tactile_sl_sim.scenes import SceneError, load_scenes, parse_scene
 from tactile_sl_sim.synth import FrameIds, RendererCache, frame_messages, render_scene_frame
