@@ -30,11 +30,13 @@ camera; the state is one frame of one camera (:class:`LabelCarry`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
+from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.neighbours import nearest_within
 
 CROP = 3   # pixels left out on each side of a patch for the correlation (the glyph's ring)
@@ -186,3 +188,42 @@ class LabelCarry:
                             np.asarray(label, np.uint8).copy(),
                             np.asarray(confidence, np.float32).copy(), carried_for,
                             frame.patches, frame.spacing_px)
+
+
+def label_glyphs(images: Sequence[Glyphs], carries: Sequence[LabelCarry | None],
+                 predict: Callable[[np.ndarray], tuple[np.ndarray, Any]]) -> int:
+    """Label the glyphs of one or more images (in place), one classifier batch.
+
+    With a :class:`LabelCarry` per image, glyphs that keep the previous frame's label are
+    not classified; ``predict`` (patches -> labels, confidences) sees the others only, and
+    is not called when there are none.  Returns the number of glyphs labelled from the
+    previous frame.
+    """
+    work = [(g, c) for g, c in zip(images, carries) if len(g) and g.patches is not None]
+    for g, c in zip(images, carries):
+        if c is not None and not (len(g) and g.patches is not None):
+            c.reset()
+    if not work:
+        return 0
+    patches = [np.asarray(g.patches) for g, _ in work]
+    frames = [c.carry(g.u, g.v, p, g.spacing_px) if c is not None else None
+              for (g, c), p in zip(work, patches)]
+    todo = [np.flatnonzero(~f.carried) if f is not None else slice(None) for f in frames]
+    batch = [p[t] for p, t in zip(patches, todo)]
+    sizes = [len(b) for b in batch]
+    label, conf = (predict(np.concatenate(batch)) if sum(sizes)
+                   else (np.zeros(0, np.uint8), np.zeros(0, np.float32)))
+    start = carried = 0
+    for (g, c), f, t, k in zip(work, frames, todo, sizes):
+        if f is None:
+            g.label = np.asarray(label[start:start + k], np.uint8)
+            g.confidence = np.asarray(conf[start:start + k], np.float32)
+        else:
+            g.label, g.confidence = f.label.copy(), f.confidence.copy()
+            g.label[t] = label[start:start + k]
+            g.confidence[t] = conf[start:start + k]
+            assert c is not None     # f is None exactly where c is
+            c.remember(f, g.label, g.confidence)
+            carried += int(f.carried.sum())
+        start += k
+    return carried

@@ -28,7 +28,7 @@ with the extraction's threshold plane), re-sampled around the new centre and rep
 * the classifier does not read another symbol there (unknown or the cell's symbol).
 
 The measurement then meets the same stereo and surface-outlier gates as any other pair
-(:meth:`~tactile_sl_decoder.pipeline.StereoPipeline.triangulate`). Like the detection it
+(:func:`~tactile_sl_decoder.stereo.pair.pair_points`). Like the detection it
 stands in for, it is a measurement of the image: a guided search, the correspondence
 step of model-based tracking (G. Klein and D. Murray, "Parallel Tracking and Mapping for
 Small AR Workspaces", ISMAR 2007, sec. 5.2: patches searched for at their predicted
