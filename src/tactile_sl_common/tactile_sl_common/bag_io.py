@@ -301,16 +301,6 @@ class BagReader:
                 channel.topic, schema.name, int(counts.get(channel_id, 0)))
         self._decoders: dict[int, DecoderFunction] = {}
 
-    @property
-    def start_time_ns(self) -> int:
-        stats = self._summary.statistics
-        return int(stats.message_start_time) if stats else 0
-
-    @property
-    def end_time_ns(self) -> int:
-        stats = self._summary.statistics
-        return int(stats.message_end_time) if stats else 0
-
     def topics_of_type(self, schema_name: str) -> list[str]:
         return sorted(t.name for t in self.topics.values() if t.schema_name == schema_name)
 

@@ -19,6 +19,13 @@ from typing import Any
 import numpy as np
 import yaml
 
+try:  # package:// URLs only; the libraries work without ROS
+    from ament_index_python.packages import get_package_share_directory
+except ImportError:  # pragma: no cover - without a ROS install
+    get_package_share_directory = None  # type: ignore[assignment]  # checked where used
+
+from tactile_sl_common.safe_files import write_files
+
 DISTORTION_MODELS = {"plumb_bob": (5,), "rational_polynomial": (8,), "equidistant": (4,)}
 
 
@@ -201,8 +208,8 @@ def resolve_url(url: str) -> pathlib.Path:
         rest = url[len("package://"):]
         package, _, relative = rest.partition("/")
         try:
-            from ament_index_python.packages import get_package_share_directory
-
+            if get_package_share_directory is None:
+                raise LookupError("ament_index_python is not installed")
             share = get_package_share_directory(package)
         except Exception as exc:  # PackageNotFoundError or ament_index missing
             raise CameraInfoError(f"{url}: package {package!r} not found ({exc})") from exc
@@ -261,7 +268,5 @@ def camera_info_yaml_text(calib: CameraCalibration) -> str:
 
 def save_camera_info_yaml(path: str | os.PathLike, calib: CameraCalibration) -> pathlib.Path:
     """Write one camera's calibration as camera_calibration YAML (atomically); the path."""
-    from tactile_sl_common.safe_files import write_files
-
     p = pathlib.Path(path)
     return write_files(p.parent, {p.name: camera_info_yaml_text(calib).encode()})[0]

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import cv2
 import numpy as np
 
 CHANNELS = {"mono8": 1, "8UC1": 1, "bgr8": 3, "rgb8": 3, "8UC3": 3, "bgra8": 4, "rgba8": 4}
@@ -43,8 +44,6 @@ def image_to_array(msg: Any) -> np.ndarray:
 
 def to_gray(msg: Any) -> np.ndarray:
     """Grey levels (H, W) uint8 of an Image message in any supported encoding."""
-    import cv2
-
     pixels = image_to_array(msg)
     encoding = str(msg.encoding)
     if pixels.ndim == 2:

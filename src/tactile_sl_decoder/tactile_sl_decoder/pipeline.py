@@ -28,13 +28,16 @@ import numpy as np
 
 from tactile_sl_common.camera_info import CameraInfoError
 from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry, label_glyphs
+from tactile_sl_decoder.classify.classifier import Classifier
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
 from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
 from tactile_sl_decoder.decode.grid import GridParams
 from tactile_sl_decoder.decode.joint import decode_jointly, glyph_neighbours
 from tactile_sl_decoder.decode.track import StreamMemory
+from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
+from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
 from tactile_sl_decoder.stereo.outliers import OutlierParams
 from tactile_sl_decoder.stereo.pair import PairSettings, pair_points
 from tactile_sl_decoder.stereo.rescue import RescueParams
@@ -101,8 +104,6 @@ class PatternSpec:
     @classmethod
     def load(cls, path: str | Path | None = None) -> "PatternSpec":
         """Load a contract pattern YAML (default: the shipped pattern)."""
-        from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
-
         return cls.from_pattern(load_pattern(path or default_pattern_path()))
 
 
@@ -136,16 +137,12 @@ class StereoPipeline:
 
     def _extract(self, gray: np.ndarray) -> Any:
         if self._extractor is None:
-            from tactile_sl_decoder.extract.extraction import extract_symbols
-
             self._extractor = extract_symbols
         return self._extractor(gray, self.params.extraction)
 
     def load_classifier(self) -> Any:
         """The classifier, loaded on first use from ``params.classifier_weights``."""
         if self.classifier is None:
-            from tactile_sl_decoder.classify.classifier import Classifier
-
             self.classifier = Classifier.load(self.params.classifier_weights,
                                               self.params.classifier_threshold)
         return self.classifier

@@ -199,6 +199,43 @@ def test_the_checker_sees_violations(tmp_path):
     assert f"{NAME}.nodes.decoder_node" in names
 
 
+LAZY_IMPORTS = ("torch", "tactile_sl_decoder.classify.model")
+"""What a function may import itself: torch (1-2 s) is for training and old weight files only,
+and the nodes and the other commands must not pay for it.  Everything else is imported at the
+top of its module (the CLI imports only the module of the command it runs)."""
+
+
+def function_local_imports(path: pathlib.Path) -> list[tuple[int, str]]:
+    """(line, module) of every import inside a function of ``path``."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            for sub in ast.walk(node):
+                if isinstance(sub, ast.Import):
+                    found += [(sub.lineno, alias.name) for alias in sub.names]
+                elif isinstance(sub, ast.ImportFrom):
+                    found.append((sub.lineno, "." * sub.level + (sub.module or "")))
+    return sorted(set(found))
+
+
+def test_functions_import_only_what_start_up_time_keeps_out_of_the_module_top():
+    bad = []
+    for package in PACKAGE_DEPENDENCIES:
+        root = REPO / "src" / package
+        for path in sorted((root / package).rglob("*.py")):
+            bad += [f"{path.relative_to(REPO)}:{line} imports {name} in a function"
+                    for line, name in function_local_imports(path)
+                    if not any(_is_under(name, lazy) for lazy in LAZY_IMPORTS)]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_local_import_reader_sees_nested_and_relative_imports(tmp_path):
+    probe = tmp_path / "probe.py"
+    probe.write_text("import os\n"
+                     "def f():\n    def g():\n        from ..x import y\n    import torch\n")
+    assert function_local_imports(probe) == [(4, "..x"), (5, "torch")]
+
+
 CONTRACT_NAMES = {"LABEL_UNKNOWN", "CELL_UNKNOWN", "PATCH_SIZE", "PATCH", "SLIP_NO_CONTACT",
                   "SLIP_STICK", "SLIP_PARTIAL", "SLIP_GROSS"}
 

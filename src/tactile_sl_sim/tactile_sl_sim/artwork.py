@@ -17,6 +17,11 @@ import cv2
 import numpy as np
 import yaml
 
+try:  # the installed artwork; from a source tree without ROS, the file beside the package
+    from ament_index_python.packages import get_package_share_directory
+except ImportError:  # pragma: no cover - without a ROS install
+    get_package_share_directory = None  # type: ignore[assignment]  # checked where used
+
 WORK_PITCH_PX = 40.0  # texture resolution the renderer resamples the artwork to (px per cell)
 
 
@@ -27,8 +32,8 @@ class ArtworkError(ValueError):
 def default_artwork_path() -> pathlib.Path:
     """The artwork installed with the package (share/tactile_sl_sim/artwork/pattern.png)."""
     try:
-        from ament_index_python.packages import get_package_share_directory
-
+        if get_package_share_directory is None:
+            raise LookupError("ament_index_python is not installed")
         share = pathlib.Path(get_package_share_directory("tactile_sl_sim"))
         return share / "artwork" / "pattern.png"
     except Exception:  # not installed: fall back to the source tree

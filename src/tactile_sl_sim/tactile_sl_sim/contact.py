@@ -151,7 +151,6 @@ class FieldGrid:
         self.slope = np.zeros((self.ny, self.nx, 2))
         self.active_box: tuple[float, float, float, float] | None = None
         self.active_index: tuple[int, int, int, int] | None = None
-        self._data32: np.ndarray | None = None
         self._table32: np.ndarray | None = None
         self._max: float | None = None
 
@@ -221,12 +220,6 @@ class FieldGrid:
             return self.x0, self.y0
         return (self.x0 + self.active_index[2] * self.spacing,
                 self.y0 + self.active_index[0] * self.spacing)
-
-    @property
-    def data32(self) -> np.ndarray:
-        if self._data32 is None:
-            self._data32 = np.ascontiguousarray(self.data, dtype=np.float32)
-        return self._data32
 
     @property
     def table32(self) -> np.ndarray:

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import ndimage
 
+from tactile_sl_common.clouds import FIELD_DTYPE, cloud_to_arrays
 from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_sim.friction import (
     STATE_NO_CONTACT,
@@ -306,8 +307,6 @@ def touch_truth_from_messages(wrench: object | None, field_cloud: object, contac
     with geometric indenters; ``slip`` its ``ground_truth/slip``, None without friction),
     so an evaluation reads bags and renders alike.
     """
-    from tactile_sl_common.clouds import FIELD_DTYPE, cloud_to_arrays
-
     cells = cloud_to_arrays(field_cloud, FIELD_DTYPE)
     w = None if wrench is None else wrench.wrench  # type: ignore[attr-defined]
     c = contact

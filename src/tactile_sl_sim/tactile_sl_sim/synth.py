@@ -12,8 +12,10 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator
 
+import cv2
 import numpy as np
 
+from tactile_sl_common.bag_io import BagWriter
 from tactile_sl_common.camera_info import camera_info_fields
 from tactile_sl_common.clouds import cloud_fields, pack_field, pack_points
 from tactile_sl_common.images import image_fields
@@ -176,8 +178,6 @@ def write_scene_bag(scene: Scene, renderer: Renderer, path: str | os.PathLike,
                     namespace: str = "/tactile", ids: FrameIds | None = None,
                     on_frame: Callable[[int], None] | None = None) -> pathlib.Path:
     """Write a scene as a rosbag2-compatible MCAP bag; log time = stamp."""
-    from tactile_sl_common.bag_io import BagWriter
-
     p = pathlib.Path(path)
     tmp = p.with_name(p.name + ".partial")
     ns = "/" + namespace.strip("/") if namespace.strip("/") else ""
@@ -198,8 +198,6 @@ def benchmark(renderer: Renderer, frames: int = 20, contacts: list[Contact] | No
     Returns (per wall-clock second, per CPU second); OpenCV is limited to one thread, so on a
     busy machine the CPU figure is the one that says what one free core does.
     """
-    import cv2
-
     if contacts is None:
         contacts = [Contact("sphere", radius=0.004, x=0.0005, y=-0.0003, depth=0.0006)]
     threads = cv2.getNumThreads()

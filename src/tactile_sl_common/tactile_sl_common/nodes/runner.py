@@ -18,6 +18,11 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+try:
+    from rclpy.experimental import EventsExecutor
+except ImportError:   # an rclpy without it: the classic executor
+    EventsExecutor = None  # type: ignore[assignment]  # checked where used
+
 from tactile_sl_common.nodes import stop
 
 ConfigurationErrors = tuple[type[BaseException], ...]
@@ -33,13 +38,9 @@ def make_executor() -> Executor:
     camera_info subscriptions). ``TACTILE_SL_EXECUTOR=single`` picks the classic
     single-threaded one.
     """
-    if os.environ.get("TACTILE_SL_EXECUTOR", "events") != "single":
-        try:
-            from rclpy.experimental import EventsExecutor
-        except ImportError:   # an rclpy without it: the classic executor
-            pass
-        else:
-            return EventsExecutor()
+    if os.environ.get("TACTILE_SL_EXECUTOR", "events") != "single" and (
+            EventsExecutor is not None):
+        return EventsExecutor()
     return SingleThreadedExecutor()
 
 

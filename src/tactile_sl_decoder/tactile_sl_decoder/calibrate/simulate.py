@@ -22,6 +22,7 @@ from tactile_sl_common.bag_io import BagWriter
 from tactile_sl_common.camera_info import camera_info_fields, save_camera_info_yaml
 from tactile_sl_common.images import image_fields
 from tactile_sl_decoder.calibrate.checkerboard import board_points
+from tactile_sl_decoder.pattern.artwork import render_array
 from tactile_sl_sim.artwork import Artwork, checkerboard_albedo, load_artwork
 from tactile_sl_sim.optics import rotation_xyz
 from tactile_sl_sim.render import Renderer
@@ -53,7 +54,6 @@ def artwork_of(pattern: Any = None) -> Artwork:
     """
     if pattern is None:
         return load_artwork()
-    from tactile_sl_decoder.pattern.artwork import render_array
 
     image, facts = render_array(pattern, 40.0)
     return Artwork(image.astype(np.float32) / 255.0, tuple(facts["cell00_px"]),

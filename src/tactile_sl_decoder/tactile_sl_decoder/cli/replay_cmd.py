@@ -14,16 +14,31 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from tactile_sl_common.bag_io import BagError, BagReader, BagWriter
+from tactile_sl_common.clouds import cloud_fields
+from tactile_sl_common.images import ImageFormatError, to_gray
+from tactile_sl_common.safe_files import OutputError, check_output, same_file
+from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
 from tactile_sl_decoder.cli.argtypes import number
+from tactile_sl_decoder.decode.codewords import PatternError
+from tactile_sl_decoder.frames import bag_frames, bag_topics, count_bag_frames
+from tactile_sl_decoder.glyphs import PipelineInputError
+from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline
+from tactile_sl_decoder.sensor_step import SensorStep
+from tactile_sl_decoder.tooling.progress import progress_bar
+from tactile_sl_decoder.touch.messages import pose_fields, touch_messages
+from tactile_sl_decoder.touch.reference import residual_warning
+from tactile_sl_decoder.touch.sensor import load_sensor
+from tactile_sl_decoder.touch.stage import TouchParams
 
 if TYPE_CHECKING:
     from tactile_sl_decoder.touch.driver import TouchFrame
 
 
-def register(subparsers: Any) -> None:
+def register(subparsers: Any, summary: str | None = None) -> None:
     """Add the ``replay`` subcommand."""
     p = subparsers.add_parser(
-        "replay", help="decode a bag offline into /tactile/points (same pipeline as the node)",
+        "replay", help=summary,
         description="Decode every stereo frame of IN.mcap (images + camera_info) and write "
                     "the point clouds to OUT.mcap as /tactile/points.")
     p.add_argument("input", metavar="IN.mcap", help="bag with /tactile/{left,right}/image_raw "
@@ -53,20 +68,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Replay a bag; exit status 0 on success, 1 on bad input files."""
-    from tactile_sl_common.bag_io import BagError, BagWriter
-    from tactile_sl_common.clouds import cloud_fields
-    from tactile_sl_common.images import ImageFormatError, to_gray
-    from tactile_sl_common.safe_files import OutputError, check_output, same_file
-    from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
-    from tactile_sl_decoder.decode.codewords import PatternError
-    from tactile_sl_decoder.frames import bag_frames, bag_topics
-    from tactile_sl_decoder.glyphs import PipelineInputError
-    from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline
-    from tactile_sl_decoder.sensor_step import SensorStep
-    from tactile_sl_decoder.tooling.progress import progress_bar
-    from tactile_sl_decoder.touch.sensor import load_sensor
-    from tactile_sl_decoder.touch.stage import TouchParams
-
     out_path = Path(args.output)
     try:     # OUT must not be IN: decided by the file system (hard links, bag directories)
         check_output(out_path, [args.input])
@@ -149,9 +150,6 @@ def _count_input_frames(args: argparse.Namespace, touch: bool) -> int:
     Raises BagError (unreadable, topics missing, no frames) or ValueError (the touch
     reference would take every frame: no touch output could follow).
     """
-    from tactile_sl_common.bag_io import BagError, BagReader
-    from tactile_sl_decoder.frames import bag_topics, count_bag_frames
-
     reader = BagReader(args.input)
     topics = bag_topics(args.namespace)
     reader.require_topics([topics[k] for k in ("left_image", "right_image", "left_info",
@@ -197,9 +195,6 @@ def _write_touch(writer: Any, touch: "TouchFrame", frame: Any, prefix: str,
     Offline the reference is prepared in line: it is ready at the frame that completes it,
     and every later frame has outputs (none waits, so there is no backlog).
     """
-    from tactile_sl_decoder.touch.messages import pose_fields, touch_messages
-    from tactile_sl_decoder.touch.reference import residual_warning
-
     if touch.reference_failed is not None:
         print(f"tactile-sl replay: frame {frame.stamp[0]}.{frame.stamp[1]:09d}: reference not "
               f"usable ({touch.reference_failed}); trying again with the next frames",

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from itertools import combinations, product
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -132,7 +133,6 @@ class Codebook:
         self.weights = self.base ** np.arange(self.n, dtype=np.int64)
 
         # All windows, (M, n) row-major, and their anchor cells.
-        from numpy.lib.stride_tricks import sliding_window_view
         win = sliding_window_view(self.array, (wr, wc)).reshape(-1, self.n)
         nr, nc = self.rows - wr + 1, self.cols - wc + 1
         ar, ac = np.meshgrid(np.arange(nr) + self.anchor[0], np.arange(nc) + self.anchor[1],

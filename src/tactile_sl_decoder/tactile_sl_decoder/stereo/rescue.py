@@ -45,6 +45,8 @@ from scipy.spatial import cKDTree
 
 from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
+from tactile_sl_decoder.extract.centroid import patch_centroid_offset
+from tactile_sl_decoder.extract.patches import sample_patches
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.stereo.transfer import cell_table, predict_missing
 
@@ -183,8 +185,6 @@ def _predict(uv_s: np.ndarray, ts: np.ndarray, uv_d: np.ndarray, td: np.ndarray,
 
 def _typical_contrast(dst: Glyphs, gray: np.ndarray, extraction: Any, spacing: float) -> float:
     """Median :func:`ink_contrast` of the glyphs the image's extraction found."""
-    from tactile_sl_decoder.extract.extraction import sample_patches
-
     size = int(extraction.patch_size)
     patches = dst.patches
     if patches is None or len(patches) != len(dst) or patches.shape[1] != size:
@@ -199,9 +199,6 @@ def _measure(gray: np.ndarray, predicted: np.ndarray, symbol: np.ndarray, spacin
              classify: Callable[[np.ndarray], tuple[np.ndarray, Any]], p: RescueParams
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centres (M, 2), readings and acceptance of glyphs looked for at ``predicted``."""
-    from tactile_sl_decoder.extract.centroid import patch_centroid_offset
-    from tactile_sl_decoder.extract.extraction import sample_patches
-
     size = int(extraction.patch_size)
     step = np.full(len(predicted), spacing * extraction.patch_span / size, np.float32)
     u = predicted[:, 0].astype(np.float32)

@@ -9,11 +9,15 @@ import os
 import pathlib
 import sys
 
+from tactile_sl_sim.artwork import ArtworkError
+from tactile_sl_sim.scenes import Scene, SceneError, load_scenes
+from tactile_sl_sim.synth import Progress, RendererCache, benchmark, write_scene_bag
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+
+def register(subparsers: argparse._SubParsersAction, summary: str | None = None) -> None:
     """Add the ``synth`` subcommand."""
     p = subparsers.add_parser(
-        "synth", help="render simulated stereo bags (images, camera_info, ground truth)",
+        "synth", help=summary,
         description="Render each scene of SCENES.yaml as a rosbag2-compatible MCAP bag "
         "DIR/<scene>.mcap with /tactile/{left,right}/{image_raw,camera_info} and "
         "/tactile/ground_truth/points; scenes with load contacts (known forces) add "
@@ -36,10 +40,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``tactile-sl synth``."""
-    from tactile_sl_sim.artwork import ArtworkError
-    from tactile_sl_sim.scenes import SceneError, load_scenes
-    from tactile_sl_sim.synth import Progress, RendererCache, benchmark, write_scene_bag
-
     cache = RendererCache(args.artwork)
     if args.benchmark is not None:
         return _benchmark(args, cache, benchmark)
@@ -79,9 +79,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _benchmark(args: argparse.Namespace, cache: object, bench: object) -> int:
-    from tactile_sl_sim.artwork import ArtworkError
-    from tactile_sl_sim.scenes import Scene
-
     scene = Scene(name="benchmark")
     try:
         renderer = cache.get(scene)  # type: ignore[attr-defined]
