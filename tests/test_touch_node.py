@@ -20,7 +20,7 @@ TOUCH_TOPICS = ("field", "wrench", "contact", "depth", "slip")
 
 
 def _offline(tmp_path, bag=BAG):
-    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_common.bag_io import BagReader
     from tactile_sl_decoder.cli import main as cli_main
 
     out = tmp_path / "out.mcap"

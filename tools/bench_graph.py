@@ -40,7 +40,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
-from tactile_sl_camera.bag_io import stamp_to_ns
+from tactile_sl_common.bag_io import stamp_to_ns
 from tactile_sl_decoder.frames import count_bag_frames
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -50,7 +50,7 @@ from ros_harness import executable, ros_env, stop  # noqa: E402
 
 def _frame_rate(bag: pathlib.Path) -> float:
     """Stereo frames per second of a bag, from its left images' log times."""
-    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_common.bag_io import BagReader
     from tactile_sl_decoder.frames import bag_topics
 
     topic = bag_topics()["left_image"]

@@ -28,8 +28,10 @@ from dataclasses import dataclass
 from itertools import combinations, product
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from scipy.spatial import cKDTree
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.decode.grid import NEIGHBOUR_SLOTS, OFFSETS, Grid, window_indices
 from tactile_sl_decoder.decode.votes import group_votes, linked_regions
@@ -45,18 +47,36 @@ class PatternError(ValueError):
 class DecodeParams:
     """Thresholds of codeword decoding and of the consistency checks."""
 
-    min_confidence: float = 0.5     # labels below this confidence count as unknown
-    max_errors: int = -1            # substitutions corrected per window; -1: (h - 1) // 2
-    max_erasures: int = -1          # unknown cells tolerated per window (no errors); -1: h - 1
-    retry_confidence: float = 0.9   # erase the least confident label (if below) and retry
-    min_votes: int = 2              # agreeing window votes needed to accept a glyph's cell
-    vote_ratio: float = 0.7         # the winning cell's share of all votes for the glyph
-    grow_iterations: int = 12       # passes extending decoded regions to undecided glyphs
-    grow_min_agree: int = 2         # decided neighbours that must agree to grow a glyph
-    grow_min_agree_mismatch: int = 4  # ... when its own label contradicts that cell
-    min_component: int = 16         # smallest consistent island of decoded glyphs kept
-    island_check_px: float = 4.0    # islands near the main region must fit it (x spacing)
-    mirrored: bool = False          # cameras see the artwork mirrored (columns reversed)
+    min_confidence: float = 0.5
+    """Labels below this confidence count as unknown."""
+    max_errors: int = -1
+    """Substitutions corrected per window; -1: (h - 1) // 2."""
+    max_erasures: int = -1
+    """Unknown cells tolerated per window (no errors); -1: h - 1."""
+    retry_confidence: float = 0.9
+    """Erase the least confident label (if below this) and retry."""
+    min_votes: int = 2
+    """Agreeing window decodes needed before a glyph gets a cell."""
+    vote_ratio: float = 0.7
+    """The winning cell's share of all votes for the glyph."""
+    grow_iterations: int = 12
+    """Passes extending decoded regions to undecided glyphs."""
+    grow_min_agree: int = 2
+    """Decided neighbours that must agree to grow a glyph ..."""
+    grow_min_agree_mismatch: int = 4
+    """... when its own label contradicts that cell."""
+    min_component: int = 16
+    """Smallest region of mutually consistent decoded glyphs that is kept."""
+    island_check_px: float = 4.0
+    """Islands near the main region must fit it (x spacing)."""
+    mirrored: bool = False
+    """The cameras see the artwork mirrored (looking through the elastomer): columns
+    reversed."""
+
+
+DECODE_SETTINGS = SettingsTable(DecodeParams, fields=("mirrored", "min_votes", "min_component"),
+                                ranges={"min_votes": (1, 100), "min_component": (1, 100000)})
+"""The decoder node's live ``mirrored``, ``min_votes`` and ``min_component`` parameters."""
 
 
 @dataclass
@@ -112,7 +132,6 @@ class Codebook:
         self.weights = self.base ** np.arange(self.n, dtype=np.int64)
 
         # All windows, (M, n) row-major, and their anchor cells.
-        from numpy.lib.stride_tricks import sliding_window_view
         win = sliding_window_view(self.array, (wr, wc)).reshape(-1, self.n)
         nr, nc = self.rows - wr + 1, self.cols - wc + 1
         ar, ac = np.meshgrid(np.arange(nr) + self.anchor[0], np.arange(nc) + self.anchor[1],

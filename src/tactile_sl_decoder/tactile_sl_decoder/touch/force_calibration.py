@@ -23,9 +23,10 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from tactile_sl_camera.elasticity import Elastomer
+from tactile_sl_common.elasticity import Elastomer
+from tactile_sl_decoder.touch.driver import TouchDriver
 from tactile_sl_decoder.touch.sensor import SensorConfig, read_yaml_file
-from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
+from tactile_sl_decoder.touch.stage import TouchParams
 
 MIN_LOADS = 2
 THICKNESS_CANDIDATES = (0.0, 0.5e-3, 1e-3, 1.5e-3, 2e-3, 3e-3, 4e-3, 6e-3, 8e-3)
@@ -116,14 +117,22 @@ def load_loads_file(path: str | os.PathLike) -> list[KnownLoad]:
 def _estimates(frames: list[np.ndarray], loads: list[KnownLoad], sensor: SensorConfig,
                shape: tuple[int, int], pitch: float, mirrored: bool,
                reference_frames: int) -> tuple[np.ndarray, float]:
-    """Estimated normal forces of the loaded frames, and the mean relative residual."""
-    stage = TouchStage(sensor, shape, pitch, mirrored,
-                       TouchParams(reference_frames=reference_frames))
+    """Estimated normal forces of the loaded frames, and the mean relative residual.
+
+    An unusable reference (:class:`~tactile_sl_decoder.touch.reference.ReferenceError`) ends
+    the fit: the recording's first frames must show the untouched pad.
+    """
+    driver = TouchDriver(sensor, shape, pitch, mirrored,
+                         TouchParams(reference_frames=reference_frames))
+    stage = driver.stage
     wanted = {ld.frame: k for k, ld in enumerate(loads)}
     q = np.full(len(loads), np.nan)
     residuals = []
     for i, points in enumerate(frames):
-        out = stage.update(points)
+        touch = driver.frame(points)
+        if touch.reference_failed is not None:
+            raise touch.reference_failed
+        out = touch.result
         if i < reference_frames and i in wanted:
             raise ForceCalibrationError(f"frame {i} carries a load but is one of the "
                                         f"{reference_frames} untouched reference frame(s)")

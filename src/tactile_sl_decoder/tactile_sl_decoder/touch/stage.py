@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from tactile_sl_camera.elasticity import check_layer_resolved
+from tactile_sl_common.elasticity import check_layer_resolved
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.touch.contact import (
     ContactParams,
     ContactState,
@@ -53,28 +54,33 @@ class TouchParams:
     """Settings of the touch stage (the decoder node exposes them as parameters)."""
 
     reference_frames: int = 1
+    """Decoded frames averaged into the untouched reference (at start and after each
+    tare)."""
     traction: TractionParams = field(default_factory=TractionParams)
     contact: ContactParams = field(default_factory=ContactParams)
     slip: SlipParams = field(default_factory=SlipParams)
-    tare_max_depth: float = 5e-5   # m: a tare is refused above this indentation ...
-                                   # ... or while in_contact
-    max_pending_frames: int = 300  # frames kept while a reference is prepared in the
-                                   # background (then the oldest are dropped): ~5-10 s
+    tare_max_depth: float = 5e-5
+    """m: a tare is refused while the pad is pressed in deeper than this (or in contact)"""
+    max_pending_frames: int = 300
+    """Frames kept while a new reference is prepared in the background (about 1-2 s at
+    start, or after a tare that changes the reference's cells); they get their touch
+    outputs, late, once it is ready. Beyond this many the oldest are dropped (counted in
+    diagnostics)."""
 
     def validate(self) -> "TouchParams":
-        """Raise ValueError for values outside their ranges."""
-        if not 1 <= self.reference_frames <= 1000:
-            raise ValueError(f"reference_frames must be in 1..1000, got "
-                             f"{self.reference_frames}")
-        if self.tare_max_depth <= 0:
-            raise ValueError(f"tare_max_depth must be > 0, got {self.tare_max_depth}")
-        if not 0 <= self.max_pending_frames <= 100000:
-            raise ValueError(f"max_pending_frames must be in 0..100000, got "
-                             f"{self.max_pending_frames}")
+        """Raise ValueError for values outside their ranges (:data:`TOUCH_SETTINGS`)."""
+        TOUCH_SETTINGS.check(self)
         self.traction.validate()
         self.contact.validate()
         self.slip.validate()
         return self
+
+
+TOUCH_SETTINGS = SettingsTable(
+    TouchParams, ranges={"reference_frames": (1, 1000), "tare_max_depth": (1e-7, 0.01),
+                         "max_pending_frames": (0, 100000)},
+    read_only=("reference_frames", "max_pending_frames"))
+"""The decoder node's ``reference_frames``, ``tare_max_depth`` and ``max_pending_frames``."""
 
 
 @dataclass

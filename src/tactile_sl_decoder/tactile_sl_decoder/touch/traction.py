@@ -3,7 +3,7 @@
 Forward model (pad frame): the displacement of reference cell i is
 u_i = sum_j G(r_i - r_j) f_j, where f_j (N) is the force the object exerts on cell j, spread
 uniformly over the cell, and G the surface Green's function of the elastomer
-(:func:`tactile_sl_camera.elasticity.cell_kernel`: Boussinesq-Cerruti for a half-space,
+(:func:`tactile_sl_common.elasticity.cell_kernel`: Boussinesq-Cerruti for a half-space,
 the bonded layer's Fourier-domain compliance for ``thickness > 0``).  Every reference cell
 carries three unknowns; the system is square and solved by Tikhonov regularisation,
 f = (G^T G + a s I)^-1 G^T u with s = mean(diag G^T G) (Hansen, Rank-Deficient and Discrete
@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tactile_sl_camera.elasticity import Elastomer, cell_kernel
+from tactile_sl_common.elasticity import Elastomer, cell_kernel
 from tactile_sl_decoder.touch.cholesky import cho_factor_upper, cho_solve_upper
 
 
