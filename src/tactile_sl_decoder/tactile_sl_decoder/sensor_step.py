@@ -11,9 +11,17 @@ sequence (pipeline, touch, a failed reference started again) is written once.
 Bad input raises :class:`~tactile_sl_decoder.glyphs.PipelineInputError` (or
 ``ImageFormatError``, ``ValueError``) from the pipeline, before the touch stage sees the
 frame: callers skip the frame and carry on.  No rclpy here.
+
+A live node passes ``on_touch``: the touch stage then runs in a worker thread of its own,
+frame after frame in order, while the calling thread goes on to the next frame's pipeline
+(the frames overlap on two cores: the touch stage and slip, 2-3 ms a frame, no longer add
+to the time each frame holds the node).  Their outputs, and those of :meth:`poll_touch`,
+reach ``on_touch`` from that thread, in the frames' order.
 """
 from __future__ import annotations
 
+import queue
+import threading
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -39,20 +47,28 @@ class SensorStep:
 
     def __init__(self, pipeline: StereoPipeline, sensor: SensorConfig | None = None,
                  touch_params: TouchParams | None = None, background: bool = False,
-                 catch_up: int | None = None) -> None:
+                 catch_up: int | None = None,
+                 on_touch: Callable[[TouchFrame, Any], None] | None = None,
+                 on_touch_error: Callable[[BaseException], None] | None = None) -> None:
         """The step of ``pipeline``, with touch outputs unless ``sensor`` is None.
 
         ``background``: a live node's reference is prepared in a worker thread (frames keep
         flowing; their outputs come late, at most ``catch_up`` per frame); offline it is
-        prepared in line.
+        prepared in line.  ``on_touch(touch, tag)``: run the touch stage in a worker thread
+        and hand each frame's outputs there (see the module doc); an exception in it goes
+        to ``on_touch_error``.
         """
         self.pipeline = pipeline
         self.touch: TouchDriver | None = None
+        self._worker: _InOrderWorker | None = None
         if sensor is not None:
             pattern = pipeline.pattern
             self.touch = TouchDriver(sensor, pattern.array.shape, pattern.pitch_m,
                                      bool(pipeline.params.decode.mirrored), touch_params,
                                      background, catch_up)
+            if on_touch is not None:
+                self._worker = _InOrderWorker(self._run_touch, on_touch,
+                                              on_touch_error or _reraise)
 
     @property
     def touch_ready(self) -> bool:
@@ -89,8 +105,31 @@ class SensorStep:
             on_points(stereo)
         if self.touch is None:
             return SensorOutputs(stereo)
-        return SensorOutputs(stereo, self.touch.frame(stereo.points, tag,
-                                                      stereo.frame_id or camera_frame))
+        frame_id = stereo.frame_id or camera_frame
+        if self._worker is not None:          # outputs come to on_touch, from the worker
+            self._worker.submit((stereo.points, tag, frame_id))
+            return SensorOutputs(stereo)
+        return SensorOutputs(stereo, self.touch.frame(stereo.points, tag, frame_id))
+
+    def poll_touch(self) -> TouchFrame | None:
+        """Between frames: install a reference prepared in the background, the backlog.
+
+        With ``on_touch`` the poll runs in the touch worker, after the frames before it, and
+        its outputs go to ``on_touch`` (None is returned); else they are returned.
+        """
+        if self.touch is None:
+            return TouchFrame()
+        if self._worker is not None:
+            self._worker.submit(None)
+            return None
+        return self.touch.poll()
+
+    def _run_touch(self, job: tuple[np.ndarray, Any, str] | None) -> tuple[TouchFrame, Any]:
+        assert self.touch is not None
+        if job is None:
+            return self.touch.poll(), None
+        points, tag, frame_id = job
+        return self.touch.frame(points, tag, frame_id), tag
 
     def set_mirrored(self, mirrored: bool) -> None:
         """The cameras see the artwork mirrored (or not).
@@ -106,5 +145,45 @@ class SensorStep:
         self.pipeline.forget_frames()
 
     def close(self) -> None:
-        """Stop the pipeline's worker thread."""
+        """Stop the pipeline's worker thread and the touch worker (after its queued frames)."""
+        if self._worker is not None:
+            self._worker.close()
+            self._worker = None
         self.pipeline.close()
+
+
+def _reraise(exc: BaseException) -> None:
+    raise exc
+
+
+class _InOrderWorker:
+    """One thread that runs the jobs submitted to it in their order.
+
+    The queue holds a few frames (a submitter waits when it is full: the touch stage is a
+    fraction of a frame's time, so it never should); ``None`` jobs are polls.
+    """
+
+    def __init__(self, run: Callable[[Any], tuple[TouchFrame, Any]],
+                 deliver: Callable[[TouchFrame, Any], None],
+                 on_error: Callable[[BaseException], None], depth: int = 8) -> None:
+        self._run, self._deliver, self._on_error = run, deliver, on_error
+        self._jobs: queue.Queue[tuple[bool, Any]] = queue.Queue(maxsize=depth)
+        self._thread = threading.Thread(target=self._loop, daemon=True, name="touch")
+        self._thread.start()
+
+    def submit(self, job: Any) -> None:
+        self._jobs.put((True, job))
+
+    def close(self, timeout: float = 5.0) -> None:
+        self._jobs.put((False, None))
+        self._thread.join(timeout)
+
+    def _loop(self) -> None:
+        while True:
+            more, job = self._jobs.get()
+            if not more:
+                return
+            try:
+                self._deliver(*self._run(job))
+            except Exception as exc:     # reported by the owner (a node logs it)
+                self._on_error(exc)

@@ -49,6 +49,7 @@ from tactile_sl_decoder.nodes.touch_outputs import CATCH_UP_BURST, TouchOutputs
 from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline, StereoResult
 from tactile_sl_decoder.sensor_step import SensorStep
 from tactile_sl_decoder.symbol_array import fill_message, from_message
+from tactile_sl_decoder.touch.driver import TouchFrame
 from tactile_sl_decoder.touch.sensor import load_sensor
 from tactile_sl_decoder.touch.stage import TouchParams
 
@@ -85,9 +86,11 @@ class DecoderNode(Node):
                              s.classifier_weights or "(shipped)")
         sensor = (self.overrides.apply_to(load_sensor(s.sensor_file or None), s.pad_frame)
                   if s.touch else None)
-        # the reference is prepared in a worker thread: images keep flowing meanwhile
+        # the reference is prepared in a worker thread: images keep flowing meanwhile; the
+        # touch stage runs in a thread of its own, overlapping the next frame's pipeline
         self.step = SensorStep(self.pipeline, sensor, self.touch_params, background=True,
-                               catch_up=CATCH_UP_BURST)
+                               catch_up=CATCH_UP_BURST, on_touch=self._on_touch,
+                               on_touch_error=self._on_touch_error)
         self.sync = StereoSync(int(s.sync_slop * 1e9), s.queue_size, int(s.max_age * 1e9))
         self._last_warn: dict[str, float] = {}
         self.info: dict[str, Any] = {"left": None, "right": None}
@@ -106,7 +109,7 @@ class DecoderNode(Node):
         self.pub_points = self.create_publisher(PointCloud2, "points", out_qos)
         self.touch = (None if self.step.touch is None else
                       TouchOutputs(self, self.live, self.step.touch, self.frame_prefix,
-                                   out_qos))
+                                   out_qos, self.step.poll_touch))
         self.pub_sym = {}
         if s.publish_symbols and SymbolArray is not None:
             for side in ("left", "right"):
@@ -292,8 +295,6 @@ class DecoderNode(Node):
             self.warn(kind, f"frame {stamp[0]}.{stamp[1]:09d} skipped: {exc}")
             return
         result = out.stereo
-        if self.touch is not None:
-            self.touch.publish_frame(out.touch, stamp)
         if self.pub_sym:
             for side, glyphs, src in (("left", result.left, left_msg),
                                       ("right", result.right, right_msg)):
@@ -310,6 +311,16 @@ class DecoderNode(Node):
             self._health_pending = True
         if self._health_pending:
             self._check_calibration(result)
+
+    def _on_touch(self, touch: TouchFrame, stamp: tuple[int, int] | None) -> None:
+        """The touch worker's outputs of one frame (or of a poll: ``stamp`` None)."""
+        if self.touch is not None:
+            self.touch.publish_frame(touch, stamp)
+
+    def _on_touch_error(self, exc: BaseException) -> None:
+        """An error in the touch worker: said loudly, the frames go on."""
+        self.get_logger().error(f"touch outputs of a frame failed: {type(exc).__name__}: "
+                                f"{exc}")
 
     def _publish_points(self, result: StereoResult, stamp: tuple[int, int],
                         camera_frame: str) -> None:

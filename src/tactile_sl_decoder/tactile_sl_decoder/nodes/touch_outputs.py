@@ -12,7 +12,7 @@ the node's :class:`~tactile_sl_decoder.sensor_step.SensorStep` (its
 from __future__ import annotations
 
 import array
-from typing import Any
+from typing import Any, Callable
 
 from geometry_msgs.msg import Point, PoseStamped, Vector3, WrenchStamped
 from rclpy.node import Node
@@ -130,9 +130,15 @@ class TouchOutputs:
     """The touch outputs of the decoder node: publishers, the tare service, the pad pose."""
 
     def __init__(self, node: Node, live: LiveParameters, driver: TouchDriver, frame_prefix: str,
-                 out_qos: QoSProfile) -> None:
+                 out_qos: QoSProfile, poll: Callable[[], TouchFrame | None]) -> None:
+        """Publishers, the tare service and the reference's poll timer.
+
+        ``poll`` installs a reference prepared in the background (SensorStep.poll_touch: its
+        outputs come back through :meth:`publish_frame`, or are returned).
+        """
         self.node = node
         self.driver = driver
+        self._poll = poll
         self.announced_waiting = False
         self.tares = 0             # tares accepted (the reference is taken again)
         self.last_tare = ""        # the answer to the last tare request
@@ -149,10 +155,10 @@ class TouchOutputs:
         self.pub_pose = node.create_publisher(PoseStamped, "pad_pose", latched)
         self.tf = StaticTransformBroadcaster(node) if StaticTransformBroadcaster else None
         node.create_service(Trigger, "tare", self._on_tare)
-        # announce (and install) a reference prepared in the background as soon as it is done;
-        # the timer runs only while one is being prepared (no wake-ups otherwise)
+        # announce (and install) a reference prepared in the background as soon as it is
+        # done, and publish its backlog: a 20 Hz timer that looks at two flags otherwise (the
+        # touch worker cannot start a timer, and the events executor has no guard conditions)
         self._poll_timer = node.create_timer(0.05, self._poll_reference)
-        self._poll_timer.cancel()
         e = sensor.elastomer
         node.get_logger().info(
             f"touch: E {e.youngs_modulus:.3g} Pa, nu {e.poisson_ratio:.3g}, "
@@ -181,13 +187,15 @@ class TouchOutputs:
 
     def _poll_reference(self) -> None:
         """Timer: a reference finished in the background is installed and announced."""
-        self.publish(self.driver.poll())
         stage = self.driver.stage
-        if not stage.preparing and not stage.caught_up:
-            self._poll_timer.cancel()
+        if not (stage.preparing or stage.caught_up):
+            return
+        touch = self._poll()
+        if touch is not None:
+            self.publish(touch)
 
     def before_frame(self) -> None:
-        """Called with each frame's points, before the touch stage sees them."""
+        """Called with each frame's points (executor thread), before the touch stage runs."""
         if not self.driver.ready and not self.announced_waiting:
             self.announced_waiting = True
             self.node.get_logger().info(
@@ -195,15 +203,15 @@ class TouchOutputs:
                 f"{self.driver.stage.params.reference_frames} decoded frame(s) of the "
                 f"untouched pad")
 
-    def publish_frame(self, touch: TouchFrame, stamp: tuple[int, int]) -> None:
-        """One frame's touch outputs, after those of frames that waited for the reference."""
+    def publish_frame(self, touch: TouchFrame, stamp: tuple[int, int] | None) -> None:
+        """One frame's touch outputs, after those of frames that waited for the reference.
+
+        Called from the touch worker (SensorStep's ``on_touch``); ``stamp`` None: a poll's.
+        """
         if not self.publish(touch):
             return
-        if touch.result is not None:
+        if touch.result is not None and stamp is not None:
             self._publish(touch.result, stamp)
-        stage = self.driver.stage
-        if (stage.preparing or stage.caught_up) and self._poll_timer.is_canceled():
-            self._poll_timer.reset()
 
     def publish(self, touch: TouchFrame) -> bool:
         """The reference's news and the backlog's next outputs; False if the reference failed.

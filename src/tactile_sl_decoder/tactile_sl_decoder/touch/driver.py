@@ -19,6 +19,7 @@ calibration runs it over frames decoded once.
 """
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -61,16 +62,21 @@ class TouchDriver:
         self.stage = TouchStage(sensor, shape, pitch, mirrored, params, background)
         self.catch_up = catch_up        # backlog frames handed out per call; None: all
         self._completing: tuple[Any, str] = (None, "")   # tag, camera frame
+        # frames may come from a worker thread (SensorStep's touch worker) while a node's
+        # executor tares, restarts or polls: one call at a time
+        self._lock = threading.RLock()
 
     def restart(self, mirrored: bool) -> None:
         """A new stage, same sensor and settings: a new reference from the next frames."""
-        old = self.stage
-        self.stage = TouchStage(old.sensor, old.shape, old.pitch, mirrored, old.params,
-                                old.background)
+        with self._lock:
+            old = self.stage
+            self.stage = TouchStage(old.sensor, old.shape, old.pitch, mirrored, old.params,
+                                    old.background)
 
     def tare(self) -> tuple[bool, str]:
         """Start a new reference from the next frames (refused while the pad is pressed)."""
-        return self.stage.tare()
+        with self._lock:
+            return self.stage.tare()
 
     @property
     def ready(self) -> bool:
@@ -83,6 +89,10 @@ class TouchDriver:
         ``tag`` comes back with the frame's outputs if it has to wait for a reference
         prepared in the background; ``frame_id`` is its camera frame (for the pad pose).
         """
+        with self._lock:
+            return self._frame(points, tag, frame_id)
+
+    def _frame(self, points: np.ndarray, tag: Any, frame_id: str) -> TouchFrame:
         stage = self.stage
         had_reference, was_preparing = stage.ready, stage.preparing
         try:
@@ -103,6 +113,10 @@ class TouchDriver:
 
         Returns the backlog's next outputs and the reference's news, as :meth:`frame` does.
         """
+        with self._lock:
+            return self._poll()
+
+    def _poll(self) -> TouchFrame:
         out = TouchFrame()
         stage = self.stage
         if stage.preparing:
