@@ -27,6 +27,7 @@ from typing import Any, Callable
 import numpy as np
 
 from tactile_sl_common.camera_info import CameraInfoError
+from tactile_sl_decoder.camera_processes import CameraJob, CameraProcesses
 from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry, label_glyphs
 from tactile_sl_decoder.classify.classifier import Classifier
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
@@ -58,6 +59,8 @@ class PipelineParams:
     rescue: RescueParams = field(default_factory=RescueParams)  # undetected glyphs, images path
     extraction: Any = None          # tactile_sl_decoder.extract.extraction.ExtractionParams
     threads: int = 2                # >1: extract + classify left and right concurrently
+    processes: bool = False         # each camera's extraction + classification in a process
+                                    # of its own (camera_processes.py; a live node's default)
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
     switch_interval_ms: float = 1.0  # with threads > 1: Python's GIL switch interval at most
                                      # this (process-wide; 0 = leave), see shorten_switch_interval
@@ -129,7 +132,13 @@ class StereoPipeline:
         self.params.rescue.validate()
         self.memory = StreamMemory(self.params.carry)   # shares params.carry: live changes
         self._pool = None
-        if self.params.threads > 1:
+        self._procs: CameraProcesses | None = None
+        self.keep_patches = False    # with processes: the glyphs' patches come back too
+        if self.params.processes:
+            self._procs = CameraProcesses(self.params.classifier_weights,
+                                          self.params.classifier_threshold,
+                                          self.params.cpu_threads)
+        elif self.params.threads > 1:
             self._pool = ThreadPoolExecutor(max_workers=2)
             shorten_switch_interval(self.params.switch_interval_ms)
 
@@ -170,6 +179,8 @@ class StereoPipeline:
     def forget_frames(self) -> None:
         """Classify and decode the next frame in full (nothing carried from earlier frames)."""
         self.memory.forget()
+        if self._procs is not None:
+            self._procs.forget()
 
     def _extract_classify(self, job: tuple[np.ndarray, Any, LabelCarry | None]
                           ) -> tuple[Glyphs, int, float, float, float]:
@@ -243,7 +254,11 @@ class StereoPipeline:
         check_image(left_gray, rig.left, "left")
         check_image(right_gray, rig.right, "right")
         t1 = time.perf_counter()
-        if self._pool is None:
+        matches = None
+        if self._procs is not None:
+            (left, right), carried, matches, worker_ms = self._in_processes(
+                left_gray, right_gray, rig)
+        elif self._pool is None:
             left, right = self.extract_pair(left_gray, right_gray)
             t2 = time.perf_counter()
             carried = self.classify_pair(left, right, self.memory.label_carries())
@@ -261,9 +276,10 @@ class StereoPipeline:
         if label_hook is not None:
             label_hook(left, right)
         t3 = time.perf_counter()
-        result = self._finish(left, right, rig, track=True, images=(left_gray, right_gray))
+        result = self._finish(left, right, rig, track=True, images=(left_gray, right_gray),
+                              matches=matches)
         result.carried = carried
-        if self._pool is None:
+        if self._pool is None and self._procs is None:
             result.timings_ms.update(check=1e3 * (t1 - t0), extract=1e3 * (t2 - t1),
                                      classify=1e3 * (t3 - t2))
         else:
@@ -304,18 +320,20 @@ class StereoPipeline:
 
     def _finish(self, left: Glyphs, right: Glyphs, rig: StereoRig,
                 track: bool = False,
-                images: tuple[np.ndarray, np.ndarray] | None = None) -> StereoResult:
+                images: tuple[np.ndarray, np.ndarray] | None = None,
+                matches: tuple[Any, Any] | None = None) -> StereoResult:
         """Decode, pair and triangulate.
 
         ``track``: the frames of a camera stream (images path), whose cells may be carried
-        from the frame before (:meth:`decode_many`).
+        from the frame before (:meth:`decode_many`); ``matches``: the cameras' matches to
+        their previous frames when worker processes made them.
         """
         t0 = time.perf_counter()
         tracked = False
         if track:
             tracked = self.decode_many([left, right],
                                        self.memory.carried_cells([left, right],
-                                                                 self.codebook.cols))
+                                                                 self.codebook.cols, matches))
             self.memory.remember([left, right], tracked)
         else:
             self.decode_pair(left, right)
@@ -332,11 +350,30 @@ class StereoPipeline:
         result.tracked = tracked
         return result
 
+    def _in_processes(self, left_gray: np.ndarray, right_gray: np.ndarray, rig: StereoRig
+                      ) -> tuple[tuple[Glyphs, Glyphs], int, tuple[Any, Any], list[float]]:
+        """Both images' halves in the camera worker processes (camera_processes.py)."""
+        assert self._procs is not None
+        classifier = self.load_classifier()       # here too: rescue classifies
+        p = self.params
+        if not p.carry.enabled:
+            self.memory.forget()
+        carry = p.carry if p.carry.enabled else None
+        jobs = tuple(CameraJob(gray.shape, p.extraction, p.grid, carry, classifier.threshold,
+                               self.keep_patches) for gray in (left_gray, right_gray))
+        rl, rr = self._procs.run((left_gray, right_gray), (rig.left, rig.right),
+                                 (jobs[0], jobs[1]))
+        ms = [max(a, b) for a, b in zip(rl.timings_ms, rr.timings_ms)]
+        return (rl.glyphs, rr.glyphs), rl.carried + rr.carried, (rl.match, rr.match), ms
+
     def close(self) -> None:
-        """Stop the worker thread."""
+        """Stop the worker thread or processes."""
         if self._pool is not None:
             self._pool.shutdown(wait=False)
             self._pool = None
+        if self._procs is not None:
+            self._procs.close()
+            self._procs = None
 
 
 def _info_key(info: Any) -> tuple:

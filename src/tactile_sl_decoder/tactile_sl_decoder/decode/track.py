@@ -17,7 +17,7 @@ camera the label carry and the cells decoded, and when the next full decode is d
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -64,18 +64,23 @@ class StreamMemory:
         self.cells = [None, None]
         self.full_decode_in = 0
 
-    def carried_cells(self, images: Sequence[Glyphs], cols: int) -> list[np.ndarray] | None:
+    def carried_cells(self, images: Sequence[Glyphs], cols: int,
+                      matches: Sequence[Any] | None = None) -> list[np.ndarray] | None:
         """Cells carried from the previous frame per image, or None: decode in full.
 
         In full when cells are not carried, every ``refresh_frames`` frames, or when a glyph
         has no glyph of the previous frame at its place (new, or moved too far).
+        ``matches``: each camera's match of these glyphs to its previous frame's glyphs
+        (default: this memory's label carries' latest, :attr:`LabelCarry.last`; camera
+        worker processes keep their carries and send their matches).
         """
         p = self.params
         if not (p.enabled and p.cells) or self.full_decode_in <= 0:
             return None
+        if matches is None:
+            matches = [carry.last for carry in self.carries]
         out = []
-        for g, carry, prev in zip(images, self.carries, self.cells):
-            last = carry.last
+        for g, last, prev in zip(images, matches, self.cells):
             if prev is None or last is None or len(last.source) != len(g) or np.any(
                     last.source < 0):
                 return None

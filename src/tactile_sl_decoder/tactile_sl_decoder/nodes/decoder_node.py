@@ -75,6 +75,7 @@ class DecoderNode(Node):
         s = self.settings
         self.input_mode, self.frame_prefix = s.input, s.frame_prefix
         params.threads, params.cpu_threads = s.threads, s.cpu_threads
+        params.processes = s.camera_processes and s.input == "images"
         self.diag = DecoderDiagnostics(self.limits, time.monotonic())
         self.health_min_points = HealthLimits().min_points
         pattern = load_pattern_spec(s.pattern_file or None, s.allow_invalid_pattern)
@@ -278,6 +279,7 @@ class DecoderNode(Node):
                 missing = [f"{s}/camera_info" for s in ("left", "right") if self.info[s] is None]
                 raise PipelineInputError(f"no CameraInfo received yet on {', '.join(missing)}")
             if self.input_mode == "images":
+                self.pipeline.keep_patches = self.settings.publish_patches   # live setting
                 out = self.step.process(to_gray(left_msg), to_gray(right_msg),
                                         self.info["left"], self.info["right"], tag=stamp,
                                         camera_frame=camera_frame, on_points=on_points)

@@ -72,9 +72,14 @@ class DecoderNodeSettings:
     """Include the glyph patches in symbols_decoded (larger messages)."""
     publish_empty: bool = True
     """Publish a cloud with no point for frames that decoded nothing."""
+    camera_processes: bool = True
+    """Extract and classify each camera's images in a worker process of its own
+    (input=images): the two images on two cores side by side, without sharing Python's
+    interpreter lock, while this process decodes and runs the touch stage; false = in this
+    process (see threads). The same results either way."""
     threads: int = 2
-    """Worker threads for the two images of a frame: 2 extracts and classifies them
-    concurrently, 1 = sequential."""
+    """Without camera_processes: worker threads for the two images of a frame (2 extracts and
+    classifies them concurrently, 1 = sequential)."""
     cpu_threads: int = 1
     """Intra-op threads of OpenCV and BLAS in this process (0 = library defaults); 1 avoids
     oversubscription on small shared machines."""
@@ -98,7 +103,8 @@ DECODER_NODE_SETTINGS = SettingsTable(
             "threads": (1, 2), "cpu_threads": (0, 256), "warn_period": (0.0, 3600.0),
             "diagnostic_period": (0.1, 60.0)},
     read_only=("input", "pattern_file", "allow_invalid_pattern", "classifier_weights",
-               "frame_prefix", "input_depth", "publish_symbols", "threads", "cpu_threads",
+               "frame_prefix", "input_depth", "publish_symbols", "camera_processes", "threads",
+               "cpu_threads",
                "diagnostic_period", "touch", "sensor_file", "pad_frame"),
     checks={"input": _input_check, "frame_prefix": frame_prefix_check})
 
