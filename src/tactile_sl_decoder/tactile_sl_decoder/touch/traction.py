@@ -31,13 +31,18 @@ convolution) before the products.
 """
 from __future__ import annotations
 
+import dataclasses
+import functools
+import sys
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from tactile_sl_common.elasticity import Elastomer, cell_kernel
+from tactile_sl_decoder.touch import cholesky
 from tactile_sl_decoder.touch.cholesky import cho_factor_upper, cho_solve_upper
+from tactile_sl_decoder.touch.solver_cache import SolverCache, entry_key, source_digest
 
 
 @dataclass
@@ -66,6 +71,13 @@ class TractionParams:
 # Hertz discs of these radii (m) pushed through the forward model (see _area_fraction).
 AREA_FRACTIONS = (0.1, 0.15, 0.2, 0.25, 0.3, 0.35)
 TEST_RADII = (2e-3, 3e-3, 4e-3)
+_STORED = ("scale", "wrench_rows", "map_0", "map_1", "map_2", "area_fraction")
+
+
+@functools.cache
+def _code_digest() -> str:
+    """The source of the code an inversion comes from (part of its cache key)."""
+    return source_digest(sys.modules[__name__], cholesky)
 
 
 class TractionSolver:
@@ -73,7 +85,12 @@ class TractionSolver:
 
     def __init__(self, elastomer: Elastomer, pitch: float, shape: tuple[int, int],
                  cells: np.ndarray, params: TractionParams | None = None,
-                 mirrored: bool = False) -> None:
+                 mirrored: bool = False, cache: SolverCache | None = None) -> None:
+        """Prepare the inversion for ``cells``; ``cache``: read it from there, or store it.
+
+        An entry of the cache holds the very arrays computed here (:mod:`.solver_cache`),
+        so a solver read back gives the same bytes as one computed.
+        """
         self.params = (params or TractionParams()).validate()
         self.shape = (int(shape[0]), int(shape[1]))
         self.cells = np.asarray(cells, np.int64)          # flat indices row * cols + col
@@ -85,12 +102,34 @@ class TractionSolver:
         dc = self.cols[:, None] - self.cols[None, :] + self.shape[1] - 1
         # G[3i + a, 3j + b] = u_a at cell i per unit f_b on cell j
         g = kernel[dr, dc].transpose(0, 2, 1, 3).reshape(3 * n, 3 * n)
-        h = g.T @ g
-        self.scale = float(np.mean(np.diag(h)))
-        eye = self.scale * np.eye(3 * n)
+        self._g32 = g.astype(np.float32)      # forward model: fit residuals (calibration)
+        self._grid_index = np.full(self.shape, -1, np.int64)
+        self._grid_index[self.rows, self.cols] = np.arange(n)
+        self.last_support = np.zeros(n, bool)
         # Resultant: rows sum fx, fy, fz and the moments r x f about the pad origin (z = 0).
         x = (self.cols - (self.shape[1] - 1) / 2.0) * pitch * (-1.0 if mirrored else 1.0)
         y = (self.rows - (self.shape[0] - 1) / 2.0) * pitch
+        key = None
+        if cache is not None:
+            settings = {"elastomer": dataclasses.asdict(elastomer), "pitch": float(pitch),
+                        "shape": list(self.shape), "mirrored": bool(mirrored),
+                        "params": dataclasses.asdict(self.params)}
+            key = entry_key(kernel, self.cells, settings, _code_digest())
+            stored = cache.load(key, _STORED)
+            if stored is not None:
+                self._install(stored)
+                return
+        self._install(self._invert(g, x, y))
+        self.area_fraction = self._area_fraction(g, x, y, pitch)
+        if cache is not None and key is not None:
+            cache.store(key, self._stored())
+
+    def _invert(self, g: np.ndarray, x: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
+        """The two regularised inverses (resultant rows, per-component map rows)."""
+        n = len(self.cells)
+        h = g.T @ g
+        scale = float(np.mean(np.diag(h)))
+        eye = scale * np.eye(3 * n)
         s: np.ndarray = np.zeros((6, n, 3))  # per point, then flattened to (6, 3n)
         s[0, :, 0] = s[1, :, 1] = s[2, :, 2] = 1.0
         s[3, :, 2] = y                     # Mx = sum y fz
@@ -100,21 +139,32 @@ class TractionSolver:
         # (the factorisations release the GIL: touch/cholesky.py; a node prepares this in a
         # worker thread while frames keep coming)
         fw = cho_factor_upper(h + self.params.wrench_weight * eye)
-        self._wrench_rows = cho_solve_upper(fw, s.T).T @ g.T
-        # standard deviation of (M_x, M_y) per metre of i.i.d. displacement noise
-        self.moment_noise = (float(np.linalg.norm(self._wrench_rows[3])),
-                             float(np.linalg.norm(self._wrench_rows[4])))
-        self._g32 = g.astype(np.float32)      # forward model: fit residuals (calibration)
+        wrench_rows = cho_solve_upper(fw, s.T).T @ g.T
         fm = cho_factor_upper(h + self.params.map_weight * eye)
         full = cho_solve_upper(fm, g.T)
         # One contiguous matrix per force component: the normal one finds the support, the
         # tangential ones are then needed only on its rows (the map is memory-bound).
-        self._map_rows = [np.ascontiguousarray(full[axis::3], dtype=np.float32)
+        arrays = {f"map_{axis}": np.ascontiguousarray(full[axis::3], dtype=np.float32)
+                  for axis in range(3)}
+        arrays.update(scale=np.float64(scale), wrench_rows=wrench_rows,
+                      area_fraction=np.float64(np.nan))
+        return arrays
+
+    def _install(self, arrays: dict[str, np.ndarray]) -> None:
+        self.scale = float(arrays["scale"])
+        self._wrench_rows = np.asarray(arrays["wrench_rows"], np.float64)
+        # standard deviation of (M_x, M_y) per metre of i.i.d. displacement noise
+        self.moment_noise = (float(np.linalg.norm(self._wrench_rows[3])),
+                             float(np.linalg.norm(self._wrench_rows[4])))
+        self._map_rows = [np.ascontiguousarray(arrays[f"map_{axis}"], dtype=np.float32)
                           for axis in range(3)]
-        self._grid_index = np.full(self.shape, -1, np.int64)
-        self._grid_index[self.rows, self.cols] = np.arange(n)
-        self.last_support = np.zeros(n, bool)
-        self.area_fraction = self._area_fraction(g, x, y, pitch)
+        self.area_fraction = float(arrays["area_fraction"])
+
+    def _stored(self) -> dict[str, np.ndarray]:
+        arrays = {f"map_{axis}": rows for axis, rows in enumerate(self._map_rows)}
+        arrays.update(scale=np.float64(self.scale), wrench_rows=self._wrench_rows,
+                      area_fraction=np.float64(self.area_fraction))
+        return arrays
 
     # ------------------------------------------------------------------ helpers
 
