@@ -101,7 +101,7 @@ class SolverCache:
             with tempfile.NamedTemporaryFile(dir=self.directory, prefix=".tmp-",
                                              suffix=SUFFIX, delete=False) as tmp:
                 tmp_name = tmp.name
-                np.savez(tmp, **arrays)
+                np.savez(tmp, **arrays)  # type: ignore[arg-type]
             os.replace(tmp_name, path)
             tmp_name = None
             self._trim()

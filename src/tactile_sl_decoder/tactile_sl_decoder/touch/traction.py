@@ -144,10 +144,11 @@ class TractionSolver:
         full = cho_solve_upper(fm, g.T)
         # One contiguous matrix per force component: the normal one finds the support, the
         # tangential ones are then needed only on its rows (the map is memory-bound).
-        arrays = {f"map_{axis}": np.ascontiguousarray(full[axis::3], dtype=np.float32)
-                  for axis in range(3)}
-        arrays.update(scale=np.float64(scale), wrench_rows=wrench_rows,
-                      area_fraction=np.float64(np.nan))
+        arrays: dict[str, np.ndarray] = {
+            f"map_{axis}": np.ascontiguousarray(full[axis::3], dtype=np.float32)
+            for axis in range(3)}
+        arrays.update(scale=np.array(scale), wrench_rows=wrench_rows,
+                      area_fraction=np.array(np.nan))
         return arrays
 
     def _install(self, arrays: dict[str, np.ndarray]) -> None:
@@ -161,9 +162,10 @@ class TractionSolver:
         self.area_fraction = float(arrays["area_fraction"])
 
     def _stored(self) -> dict[str, np.ndarray]:
-        arrays = {f"map_{axis}": rows for axis, rows in enumerate(self._map_rows)}
-        arrays.update(scale=np.float64(self.scale), wrench_rows=self._wrench_rows,
-                      area_fraction=np.float64(self.area_fraction))
+        arrays: dict[str, np.ndarray] = {f"map_{axis}": rows
+                                         for axis, rows in enumerate(self._map_rows)}
+        arrays.update(scale=np.array(self.scale), wrench_rows=self._wrench_rows,
+                      area_fraction=np.array(self.area_fraction))
         return arrays
 
     # ------------------------------------------------------------------ helpers
