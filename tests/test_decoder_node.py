@@ -22,7 +22,7 @@ def _bag_messages(limit_frames=2):
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import CameraInfo, Image
 
-    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_common.bag_io import BagReader
 
     out, stamps = [], []
     for raw in BagReader(BAG).raw_messages():
@@ -182,8 +182,8 @@ def test_bad_input_is_warned_skipped_and_survived(ros):
 def test_replay_offline_equals_points_through_the_node(ros, tmp_path):
     """`tactile-sl replay` on a bag and the node fed the same frames give identical clouds;
     the node's symbols_decoded carry the in-process pipeline's glyphs, labels and cells."""
-    from tactile_sl_camera.bag_io import BagReader
-    from tactile_sl_camera.images import to_gray
+    from tactile_sl_common.bag_io import BagReader
+    from tactile_sl_common.images import to_gray
     from tactile_sl_decoder.cli import main as cli_main
     from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
     from tactile_sl_decoder.symbol_array import from_message
@@ -244,8 +244,8 @@ def test_symbols_input_gives_the_same_points_as_images(ros, tmp_path):
     """Chained stages: decoder fed labelled SymbolArrays == decoder fed images (replay)."""
     from rclpy.qos import qos_profile_sensor_data
 
-    from tactile_sl_camera.bag_io import BagReader
-    from tactile_sl_camera.images import to_gray
+    from tactile_sl_common.bag_io import BagReader
+    from tactile_sl_common.images import to_gray
     from tactile_sl_decoder.cli import main as cli_main
     from tactile_sl_decoder.nodes.decoder_node import make_symbol_array
     from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline

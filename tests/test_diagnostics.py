@@ -24,7 +24,7 @@ TASKS = {"input left", "input right", "processing", "coverage", "classifier",
 
 
 def _swapped_info_bag(path: Path) -> Path:
-    from tactile_sl_camera.bag_io import BagReader, BagWriter
+    from tactile_sl_common.bag_io import BagReader, BagWriter
 
     swap = {"/tactile/left/camera_info": "/tactile/right/camera_info",
             "/tactile/right/camera_info": "/tactile/left/camera_info"}

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.ros
 
 CONFIGS = {  # config file -> (package, executable, extra -p overrides)
     "src/tactile_sl_camera/config/replay.yaml": ("tactile_sl_camera", "replay", "replay"),
-    "src/tactile_sl_camera/config/sim_camera.yaml": ("tactile_sl_camera", "sim_camera", ""),
+    "src/tactile_sl_sim/config/sim_camera.yaml": ("tactile_sl_sim", "sim_camera", ""),
     "src/tactile_sl_camera/config/stereo_camera.yaml": ("tactile_sl_camera", "stereo_camera",
                                                         ""),
     "src/tactile_sl_decoder/config/decoder.yaml": ("tactile_sl_decoder", "decoder", ""),
@@ -58,7 +58,7 @@ class Client(Probe):
 
 
 def _bag(tmp_path: Path) -> Path:
-    from tactile_sl_camera.bag_io import BagReader, BagWriter
+    from tactile_sl_common.bag_io import BagReader, BagWriter
 
     path = tmp_path / "one.mcap"
     with BagWriter(path) as out:

@@ -17,10 +17,12 @@ from ros_harness import next_domain_id, start_node, stop
 
 pytestmark = pytest.mark.ros
 
-CAMERA, DECODER = "tactile_sl_camera", "tactile_sl_decoder"
+CAMERA, SIM, DECODER = "tactile_sl_camera", "tactile_sl_sim", "tactile_sl_decoder"
+PACKAGE_OF = {"replay": CAMERA, "stereo_camera": CAMERA, "sim_camera": SIM,
+              "symbol_extractor": DECODER, "symbol_classifier": DECODER}
 BAD_AT_START = [  # (package, executable, setting out of range)
     (CAMERA, "replay", "rate:=-1.0"),
-    (CAMERA, "sim_camera", "rate:=-1.0"),
+    (SIM, "sim_camera", "rate:=-1.0"),
     (CAMERA, "stereo_camera", "width:=-1"),
     (DECODER, "symbol_extractor", "block_size:=-4"),
     (DECODER, "symbol_classifier", "threshold:=5.0"),
@@ -66,7 +68,7 @@ def test_live_changes_applied_or_refused_on_every_node(tmp_path):
     bag = _bag(tmp_path)
     procs = {}
     for exe, (extra, _, _) in LIVE.items():
-        package = DECODER if exe.startswith("symbol_") else CAMERA
+        package = PACKAGE_OF[exe]
         args = ["-r", "__ns:=/tactile"]
         if exe == "replay":
             args += ["-p", f"bag:={bag}"]

@@ -9,8 +9,8 @@ import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 
-from tactile_sl_camera.bag_io import BagReader, BagWriter
-from tactile_sl_camera.images import image_fields
+from tactile_sl_common.bag_io import BagReader, BagWriter
+from tactile_sl_common.images import image_fields
 
 from ros_harness import Probe, start_node, stop, wait_until
 

@@ -19,7 +19,7 @@ def test_looping_replay_keeps_stamps_moving_forward(tmp_path):
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Image
 
-    from tactile_sl_camera.bag_io import BagReader, BagWriter
+    from tactile_sl_common.bag_io import BagReader, BagWriter
 
     bag = tmp_path / "two.mcap"
     stamps: list[int] = []
@@ -59,8 +59,8 @@ def test_a_loop_keeps_the_recorded_frame_rate_across_the_wrap(tmp_path):
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Image
 
-    from tactile_sl_camera.bag_io import BagWriter
-    from tactile_sl_camera.images import image_fields
+    from tactile_sl_common.bag_io import BagWriter
+    from tactile_sl_common.images import image_fields
 
     bag = tmp_path / "four.mcap"
     with BagWriter(bag) as out:

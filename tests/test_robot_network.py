@@ -29,7 +29,7 @@ import numpy as np
 import pytest
 from netns import NetnsPair, in_netns, netns_pair, unavailable_reason, veth_counters
 
-from tactile_sl_camera.bag_io import BagReader
+from tactile_sl_common.bag_io import BagReader
 
 from ros_harness import REPO, executable, ros_env, stop
 

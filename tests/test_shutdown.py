@@ -57,7 +57,7 @@ def _handles_sigterm(pid: int) -> bool:
 
 
 def _small_bag(path: Path, frames: int = 3) -> Path:
-    from tactile_sl_camera.bag_io import BagReader, BagWriter
+    from tactile_sl_common.bag_io import BagReader, BagWriter
 
     stamps: list[int] = []
     with BagWriter(path) as out:
@@ -86,8 +86,8 @@ def test_every_executable_exits_0_on_sigint_and_sigterm(tmp_path):
         Case("decoder-start-term", "tactile_sl_decoder", "decoder", {}, signal.SIGTERM, 1.0),
         Case("decoder-midframe-term", "tactile_sl_decoder", "decoder", {}, signal.SIGTERM,
              2.5, "decoder ready", domain=pair),
-        Case("sim-start-term", "tactile_sl_camera", "sim_camera", {}, signal.SIGTERM, 0.5),
-        Case("sim-running-int", "tactile_sl_camera", "sim_camera", {}, signal.SIGINT, 0.5,
+        Case("sim-start-term", "tactile_sl_sim", "sim_camera", {}, signal.SIGTERM, 0.5),
+        Case("sim-running-int", "tactile_sl_sim", "sim_camera", {}, signal.SIGINT, 0.5,
              "simulating"),
         Case("stereo-start-int", "tactile_sl_camera", "stereo_camera",
              {"left_device": str(tmp_path / "none.avi"), "right_device":

@@ -14,7 +14,7 @@ import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
-from tactile_sl_camera.bag_io import BagReader
+from tactile_sl_common.bag_io import BagReader
 from tactile_sl_decoder.cli import main as tactile_sl
 
 from ros_harness import Probe, start_node, stop

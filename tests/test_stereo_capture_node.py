@@ -7,9 +7,9 @@ import pytest
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-from tactile_sl_camera.camera_info import save_camera_info_yaml
-from tactile_sl_camera.clouds import cloud_to_arrays
-from tactile_sl_camera.sim.optics import SimulatedCameraPair
+from tactile_sl_common.camera_info import save_camera_info_yaml
+from tactile_sl_common.clouds import cloud_to_arrays
+from tactile_sl_sim.optics import SimulatedCameraPair
 
 from ros_harness import Probe, running_node
 
@@ -17,11 +17,12 @@ pytestmark = pytest.mark.ros
 
 
 def _run(executable: str, params: dict[str, str], domain_id: int, log):
-    """The camera node in /tactile with ``params``, its output in ``log``."""
+    """The camera (or simulator) node in /tactile with ``params``, its output in ``log``."""
     args = ["-r", "__ns:=/tactile"]
     for k, v in params.items():
         args += ["-p", f"{k}:={v}"]
-    return running_node("tactile_sl_camera", executable, domain_id, args, log)
+    package = "tactile_sl_sim" if executable == "sim_camera" else "tactile_sl_camera"
+    return running_node(package, executable, domain_id, args, log)
 
 
 class Listener(Probe):

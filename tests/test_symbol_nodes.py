@@ -12,7 +12,7 @@ import pytest
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 from sensor_msgs.msg import Image
 
-from tactile_sl_camera.images import image_fields
+from tactile_sl_common.images import image_fields
 from tactile_sl_decoder.tooling.synth_glyphs import synth_image
 from tactile_sl_msgs.msg import SymbolArray
 

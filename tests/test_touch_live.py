@@ -58,14 +58,21 @@ class TouchSession:
     def phase_start(self, pressed: bool, timeout: float = 20.0) -> None:
         """Wait for the first output of the next pressed (or untouched) phase.
 
-        It must be fresh (stamped less than 1 s before it arrived): outputs of frames that
-        waited for a reference arrive late, when the node is already further on.
+        Outputs of frames that waited for a reference arrive late, when the node is already
+        further on, interleaved with the fresh ones (a few per frame): the output before
+        must be fresh too (stamped less than 1 s before it arrived), or a stale one before
+        a fresh one would pass for a phase change.  The phase's first output must arrive
+        within half a phase (0.5 s) of its stamp, so that what the caller does next (a
+        tare) still reaches the node in that phase on a loaded machine.
         """
         def pressed_now(c) -> bool:
             return c[4] > 1e-4                   # 0.5 N presses in by about 0.2 mm
+
+        def within(c, seconds: float) -> bool:
+            return c[0] - c[1] < seconds * 1e9
         seen = len(self.contacts)
         self.wait(lambda: any(pressed_now(a) != pressed and pressed_now(b) == pressed
-                              and b[0] - b[1] < 10**9
+                              and within(a, 1.0) and within(b, 0.5)
                               for a, b in zip(self.contacts[seen - 1 if seen else 0:],
                                               self.contacts[seen:])),
                   timeout, f"no {'pressed' if pressed else 'untouched'} phase began")

@@ -19,16 +19,16 @@ import time
 import cv2
 import numpy as np
 
-from tactile_sl_camera.calibration import CalibrationError, calibrate_stereo
-from tactile_sl_camera.camera_info import CameraCalibration
-from tactile_sl_camera.sim.render import Renderer
+from tactile_sl_common.camera_info import CameraCalibration
 from tactile_sl_decoder.calibrate import (
     CalibrationOptions,
     PatternTarget,
     ViewDecoder,
     calibrate_pattern_stereo,
 )
+from tactile_sl_decoder.calibrate.checkerboard import calibrate_stereo
 from tactile_sl_decoder.calibrate.health import calibration_health, matched_cells
+from tactile_sl_decoder.calibrate.result import CalibrationError
 from tactile_sl_decoder.calibrate.simulate import (
     artwork_of,
     random_poses,
@@ -37,6 +37,7 @@ from tactile_sl_decoder.calibrate.simulate import (
     true_cells_left,
 )
 from tactile_sl_decoder.stereo.stereo import StereoRig
+from tactile_sl_sim.render import Renderer
 
 
 def _errors(left: CameraCalibration, right: CameraCalibration, baseline: float,

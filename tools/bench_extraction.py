@@ -30,6 +30,7 @@ from tactile_sl_decoder.cpu_threads import set_cpu_threads  # noqa: E402
 from tactile_sl_decoder.extract import extraction as ex  # noqa: E402
 from tactile_sl_decoder.extract.centroid import patch_centroid_offset  # noqa: E402
 from tactile_sl_decoder.extract.extraction import extract_symbols  # noqa: E402
+from tactile_sl_decoder.extract.patches import sample_patches  # noqa: E402
 from tactile_sl_decoder.tooling.synth_glyphs import synth_image  # noqa: E402
 
 
@@ -69,7 +70,7 @@ def stage_rows(gray: np.ndarray, repeat: int) -> list[str]:
     mask = ex.threshold_ink(gray, params)
     ox, oy, roi = ex._ink_box(mask)
     step = det.local_spacing * np.float32(params.patch_span / params.patch_size)
-    patches = ex.sample_patches(gray, det.u, det.v, step, params.patch_size)
+    patches = sample_patches(gray, det.u, det.v, step, params.patch_size)
     area = float(np.median(det.area))
     stages = {
         "threshold + opening": lambda: ex.threshold_ink(gray, params),
@@ -77,7 +78,7 @@ def stage_rows(gray: np.ndarray, repeat: int) -> list[str]:
             roi, 8, cv2.CV_32S, cv2.CCL_BBDT),
         "spacing": lambda: ex.estimate_spacing(det.u, det.v, params.default_spacing_px,
                                                search_px=2.4 * np.sqrt(area)),
-        "patch resampling": lambda: ex.sample_patches(gray, det.u, det.v, step,
+        "patch resampling": lambda: sample_patches(gray, det.u, det.v, step,
                                                       params.patch_size),
         "centre refinement": lambda: patch_centroid_offset(patches, params.dark_glyphs),
     }
@@ -87,8 +88,8 @@ def stage_rows(gray: np.ndarray, repeat: int) -> list[str]:
 
 def bag_images(path: str, count: int) -> list[np.ndarray]:
     """The first ``count`` left images of a bag, grey."""
-    from tactile_sl_camera.bag_io import BagReader
-    from tactile_sl_camera.images import to_gray
+    from tactile_sl_common.bag_io import BagReader
+    from tactile_sl_common.images import to_gray
 
     out = []
     for _, msg in BagReader(path).messages(["/tactile/left/image_raw"]):

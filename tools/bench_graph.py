@@ -20,7 +20,8 @@ test.
     python tools/bench_graph.py --bag /tmp/seq/press_60hz.mcap --rate 1 --seconds 60
 
 Also printed: CPU use of every decoder and replay process over the run (per cent of one
-CPU) and their resident memory when the first cloud arrives and at the end.
+CPU) and their resident memory when the first cloud arrives and at the end, each with its
+descendants (the decoder's camera worker processes).
 """
 from __future__ import annotations
 
@@ -40,7 +41,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 
-from tactile_sl_camera.bag_io import stamp_to_ns
+from tactile_sl_common.bag_io import stamp_to_ns
 from tactile_sl_decoder.frames import count_bag_frames
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
@@ -50,7 +51,7 @@ from ros_harness import executable, ros_env, stop  # noqa: E402
 
 def _frame_rate(bag: pathlib.Path) -> float:
     """Stereo frames per second of a bag, from its left images' log times."""
-    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_common.bag_io import BagReader
     from tactile_sl_decoder.frames import bag_topics
 
     topic = bag_topics()["left_image"]
@@ -207,7 +208,8 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
     for name in procs:
         if name in start and name in end:
             (t0, cpu0, rss0), (t1, cpu1, rss1) = start[name], end[name]
-            print(f"{name}: CPU {100 * (cpu1 - cpu0) / max(t1 - t0, 1e-9):.0f} % of one CPU "
+            share = 100 * (cpu1 - cpu0) / max(t1 - t0, 1e-9)
+            print(f"{name} (with its child processes): CPU {share:.0f} % of one CPU "
                   f"from {args.warmup:g} s after the first cloud on ({t1 - t0:.0f} s); "
                   f"resident memory {rss0:.1f} MB then, {rss1:.1f} MB at the end "
                   f"({rss1 - rss0:+.1f} MB)")
@@ -231,6 +233,17 @@ def _report(ns: str, what: str, got: dict[int, float], expected: int, first: int
            f"{np.percentile(lat, 99):.1f} ms, max {lat.max():.1f} ms" if len(lat) else ""))
     if first is None or not len(lat):
         return
+    if what == "cloud" and len(got) > 2:
+        # where the missing frames were: gaps of more than 1.5 frame periods in the stamps
+        stamps = np.array(sorted(got))
+        step = np.diff(stamps)
+        period = float(np.median(step))
+        gaps = np.flatnonzero(step > 1.5 * period)
+        if len(gaps):
+            where = ", ".join(f"{(stamps[i] - first) / 1e9:.2f} s ({round(step[i] / period) - 1})"
+                              for i in gaps[:12])
+            print(f"{ns}: frames missing after (missing): {where}"
+                  + (f" and {len(gaps) - 12} more gaps" if len(gaps) > 12 else ""))
     cut = first + settle_s * 1e9
     steady = np.array([v for stamp, v in got.items() if stamp >= cut])
     missing = sum(1 for stamp in clouds if stamp >= cut and stamp not in got)
@@ -241,20 +254,44 @@ def _report(ns: str, what: str, got: dict[int, float], expected: int, first: int
               f"max {steady.max():.1f} ms")
 
 
+def _proc_stat(pid: int) -> tuple[int, float, float] | None:
+    """(parent pid, CPU s, resident MB) of a live process, None once it has gone."""
+    try:
+        fields = pathlib.Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        status = pathlib.Path(f"/proc/{pid}/status").read_text()
+    except (OSError, IndexError):
+        return None
+    cpu = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")   # utime + stime
+    rss = next((int(line.split()[1]) / 1024.0 for line in status.splitlines()
+                if line.startswith("VmRSS:")), float("nan"))   # none once it has exited
+    return int(fields[1]), cpu, rss
+
+
 def _sample(procs: dict[str, subprocess.Popen]) -> dict[str, tuple[float, float, float]]:
-    """(wall s, CPU s, resident MB) of every process, by name."""
+    """(wall s, CPU s, resident MB) of every process with its descendants, by name.
+
+    The decoder's camera worker processes (``camera_processes``) count into its figures.
+    """
+    table = {}
+    for entry in pathlib.Path("/proc").iterdir():
+        if entry.name.isdigit():
+            stat = _proc_stat(int(entry.name))
+            if stat is not None:
+                table[int(entry.name)] = stat
+    children: dict[int, list[int]] = {}
+    for pid, (parent, _, _) in table.items():
+        children.setdefault(parent, []).append(pid)
     out = {}
-    tick = os.sysconf("SC_CLK_TCK")
     for name, proc in list(procs.items()):
-        try:
-            stat = pathlib.Path(f"/proc/{proc.pid}/stat").read_text()
-            fields = stat.rsplit(")", 1)[1].split()
-            cpu = (int(fields[11]) + int(fields[12])) / tick       # utime + stime
-            status = pathlib.Path(f"/proc/{proc.pid}/status").read_text()
-        except (OSError, IndexError, ValueError):
+        if proc.pid not in table:
             continue
-        rss = next((int(line.split()[1]) / 1024.0 for line in status.splitlines()
-                    if line.startswith("VmRSS:")), float("nan"))   # none once it has exited
+        cpu = rss = 0.0
+        todo = [proc.pid]
+        while todo:
+            pid = todo.pop()
+            cpu += table[pid][1]
+            rss += table[pid][2]
+            todo.extend(children.get(pid, ()))
         out[name] = (time.monotonic(), cpu, rss)
     return out
 

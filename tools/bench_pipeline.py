@@ -204,7 +204,7 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
     fresh touch reference per pass.  With ``--carry both`` the pipeline with and without
     carried labels alternate pass by pass, so their figures come from the same sitting.
     """
-    from tactile_sl_camera.images import to_gray
+    from tactile_sl_common.images import to_gray
     from tactile_sl_decoder.cpu_threads import set_cpu_threads
     from tactile_sl_decoder.frames import bag_frames
     from tactile_sl_decoder.tooling.e2e_metrics import aggregate, format_table, frame_metrics
@@ -224,6 +224,11 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
                                                  for m in modes}   # as the floors
     tables: dict[str, list] = {m: [] for m in modes}
     glyphs = []
+    points_at: list[float] = []        # when each frame's points were ready (before touch)
+
+    def points_ready(_result) -> None:
+        points_at.append(time.perf_counter())
+
     load0 = os.getloadavg()
     t_run = time.perf_counter()
     for bag in _bags(args):
@@ -234,17 +239,19 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
             last = rep == args.warmup + args.repeat - 1
             for mode in (modes if rep % 2 else modes[::-1]):   # alternate which runs first
                 pipe = pipes[mode]
-                pipe.forget_frames()
-                stage = _touch_stage(pipe) if args.touch else None
+                step = _sensor_step(pipe, args.touch)   # a fresh touch reference per pass
+                step.forget_frames()
+                stage = step.touch.stage if step.touch is not None else None
                 metrics = []
                 for fr, left, right in frames:
                     c0 = time.process_time()
                     t0 = time.perf_counter()
-                    res = pipe.process(left, right, fr.left_info, fr.right_info)
-                    t1 = time.perf_counter()
-                    touch = _update(stage, res.points) if stage is not None else None
+                    out = step.process(left, right, fr.left_info, fr.right_info,
+                                       on_points=points_ready)
                     t2 = time.perf_counter()
                     c1 = time.process_time()
+                    t1 = points_at[-1]
+                    res, touch = out.stereo, out.touch.result
                     if last and fr.ground_truth is not None:
                         metrics.append(frame_metrics(res.points, fr.ground_truth,
                                                      0.5 * pipe.pattern.pitch_m, fr.stamp_ns))
@@ -328,24 +335,17 @@ def _row(label: str, values: list[float]) -> None:
     print(f"{label:<14} {np.median(v):>10.2f} {np.percentile(v, 90):>8.2f} {v.min():>8.2f}")
 
 
-def _update(stage, points: np.ndarray):
-    """``stage.update`` as replay calls it: a failed reference starts a new one."""
-    from tactile_sl_decoder.touch.reference import ReferenceError
+def _sensor_step(pipe, touch: bool):
+    """The sensor step as replay runs it, touch outputs with the shipped sensor if ``touch``.
 
-    try:
-        return stage.update(points)
-    except ReferenceError:
-        stage.tare()
-        return None
-
-
-def _touch_stage(pipe):
-    """A touch stage for the pipeline's pattern with the shipped sensor (as replay)."""
+    The reference is the first frame; a failed reference starts a new one.
+    """
+    from tactile_sl_decoder.sensor_step import SensorStep
     from tactile_sl_decoder.touch.sensor import load_sensor
-    from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
+    from tactile_sl_decoder.touch.stage import TouchParams
 
-    return TouchStage(load_sensor(None), pipe.pattern.array.shape, pipe.pattern.pitch_m,
-                      bool(pipe.params.decode.mirrored), TouchParams(reference_frames=1))
+    return SensorStep(pipe, load_sensor(None) if touch else None,
+                      TouchParams(reference_frames=1))
 
 
 def flips(args: argparse.Namespace) -> int:
@@ -380,7 +380,7 @@ def through_ros(args: argparse.Namespace) -> int:  # noqa: C901 - a report scrip
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-    from tactile_sl_camera.bag_io import BagReader
+    from tactile_sl_common.bag_io import BagReader
 
     exe = REPO / "install" / "tactile_sl_decoder" / "lib" / "tactile_sl_decoder" / "decoder"
     domain = 150 + os.getpid() % 50

@@ -37,9 +37,9 @@ def measure(kind: str, domain_id: int, seconds: float) -> tuple[float, int]:
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-    from tactile_sl_camera.clouds import cloud_fields, pack_points
-    from tactile_sl_camera.images import to_gray
-    from tactile_sl_camera.nodes.camera_common import cloud_msg
+    from tactile_sl_common.clouds import cloud_fields, pack_points
+    from tactile_sl_common.images import to_gray
+    from tactile_sl_common.nodes.messages import cloud_msg
 
     context = Context()
     rclpy.init(context=context, domain_id=domain_id)

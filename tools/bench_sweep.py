@@ -104,7 +104,7 @@ def frame_contacts(index: int) -> list[Any]:
 
     Sphere; small, deep, sheared sphere; flat punch + cylinder; rounded edge.
     """
-    from tactile_sl_camera.sim.contact import Contact
+    from tactile_sl_sim.contact import Contact
 
     shapes = [
         [Contact(kind="sphere", radius=0.004, x=0.0003, y=-0.0002, depth=0.0005)],
@@ -181,8 +181,8 @@ class Sweep:
 
     def __init__(self, frames: int, seed: int, weights: str | None = None,
                  bound: bool = False) -> None:
-        from tactile_sl_camera.sim.artwork import load_artwork
         from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+        from tactile_sl_sim.artwork import load_artwork
 
         self.frames, self.seed, self.bound = frames, seed, bound
         self.artwork = load_artwork()
@@ -196,8 +196,8 @@ class Sweep:
         self._renderers: dict[float, Any] = {}
 
     def renderer(self, spacing: float) -> Any:
-        from tactile_sl_camera.sim.optics import RigParams, SimulatedCameraPair
-        from tactile_sl_camera.sim.render import Renderer
+        from tactile_sl_sim.optics import RigParams, SimulatedCameraPair
+        from tactile_sl_sim.render import Renderer
 
         if spacing not in self._renderers:
             rig = RigParams.for_glyph_spacing(spacing)
@@ -206,11 +206,11 @@ class Sweep:
 
     def run_row(self, names: list[str], level: int,
                 picture: pathlib.Path | None = None) -> RowFigures:
-        from tactile_sl_camera.clouds import pack_points
-        from tactile_sl_camera.sim.render import Nuisances
+        from tactile_sl_common.clouds import pack_points
         from tactile_sl_decoder.stereo.stereo import StereoRig
         from tactile_sl_decoder.tooling.centre_bound import frame_point_bounds
         from tactile_sl_decoder.tooling.e2e_metrics import frame_metrics
+        from tactile_sl_sim.render import Nuisances
 
         out = RowFigures()
         for frame in range(self.frames):

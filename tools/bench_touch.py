@@ -41,7 +41,7 @@ import time
 
 import numpy as np
 
-from tactile_sl_camera.elasticity import Elastomer
+from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
 from tactile_sl_decoder.tooling.bag_runs import evaluate_touch_bag
 from tactile_sl_decoder.tooling.slip_metrics import format_slip_report, slip_frames
@@ -67,8 +67,8 @@ def render_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str]
 
     ``only``: these scene names (all when empty).
     """
-    from tactile_sl_camera.sim.scenes import load_scenes
-    from tactile_sl_camera.sim.synth import RendererCache, write_scene_bag
+    from tactile_sl_sim.scenes import load_scenes
+    from tactile_sl_sim.synth import RendererCache, write_scene_bag
 
     cache = RendererCache()
     out.mkdir(parents=True, exist_ok=True)

@@ -37,9 +37,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image, PointCloud2
 
-from tactile_sl_camera.bag_io import stamp_to_ns
-from tactile_sl_camera.clouds import FIELD_FORCE_DTYPE, cloud_to_arrays
-from tactile_sl_camera.images import to_gray
+from tactile_sl_common.bag_io import stamp_to_ns
+from tactile_sl_common.clouds import FIELD_FORCE_DTYPE, cloud_to_arrays
+from tactile_sl_common.images import to_gray
 from tactile_sl_decoder.frames import bag_frames
 from tactile_sl_decoder.pipeline import PatternSpec
 from tactile_sl_decoder.symbol_array import from_message

@@ -5,7 +5,7 @@
 # (`source env.sh && bash tools/make_bags.sh`).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-ART="$ROOT/src/tactile_sl_camera/artwork/pattern.png"
+ART="$ROOT/src/tactile_sl_sim/artwork/pattern.png"
 if [ ! -f "$ART" ] || [ ! -f "$ART.yaml" ]; then
   echo "make_bags: $ART (and its .yaml sidecar) missing; render it with" \
        "'tactile-sl pattern render PATTERN.yaml --png $ART'" >&2

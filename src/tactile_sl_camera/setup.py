@@ -1,4 +1,4 @@
-"""ament_python package: image sources (stereo cameras, simulator, bag replay)."""
+"""ament_python package: image sources (stereo cameras, bag replay)."""
 from glob import glob
 
 from setuptools import find_packages, setup
@@ -14,7 +14,6 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
-        (f"share/{PACKAGE}/artwork", glob("artwork/*")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -26,7 +25,6 @@ setup(
         "console_scripts": [
             "replay = tactile_sl_camera.nodes.replay_node:main",
             "stereo_camera = tactile_sl_camera.nodes.stereo_camera_node:main",
-            "sim_camera = tactile_sl_camera.nodes.sim_camera_node:main",
         ],
     },
 )

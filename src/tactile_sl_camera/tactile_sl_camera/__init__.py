@@ -1,1 +1,1 @@
-"""Image sources for the tactile-sl sensor: stereo capture, simulator, bag replay."""
+"""Image sources for the tactile-sl sensor: stereo cameras through OpenCV and bag replay."""

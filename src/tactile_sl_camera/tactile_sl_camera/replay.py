@@ -11,7 +11,7 @@ import statistics
 from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
-from tactile_sl_camera.bag_io import (
+from tactile_sl_common.bag_io import (
     BagError,
     BagReader,
     header_stamp_of_cdr,

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from tactile_sl_camera.bag_io import BagError, BagWriter, header_stamp_of_cdr
-from tactile_sl_camera.images import image_fields
 from tactile_sl_camera.replay import ReplayPlan, Restamper, relative_name
+from tactile_sl_common.bag_io import BagError, BagWriter, header_stamp_of_cdr
+from tactile_sl_common.images import image_fields
 
 
 @pytest.fixture

@@ -9,6 +9,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
+from tactile_sl_decoder.pipeline import PatternSpec
+
 
 class ConfigurationError(ValueError):
     """Files or settings that do not fit together; the message names them."""
@@ -21,9 +24,6 @@ def load_pattern_spec(path: str | Path | None, allow_invalid: bool = False) -> A
     (:class:`~tactile_sl_decoder.pattern.fileio.PatternInvalidError` when it breaks them)
     unless ``allow_invalid`` (experiments only).
     """
-    from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
-    from tactile_sl_decoder.pipeline import PatternSpec
-
     pattern = load_pattern(path or default_pattern_path(), verify=not allow_invalid)
     return PatternSpec.from_pattern(pattern)
 

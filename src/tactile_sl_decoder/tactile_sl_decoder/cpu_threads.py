@@ -6,6 +6,11 @@ library to the threads it asks for. These settings are process-wide.
 """
 from __future__ import annotations
 
+import ctypes
+import sys
+
+import cv2
+
 
 def set_cpu_threads(n: int) -> None:
     """Intra-op threads of OpenCV and OpenBLAS for this process (0 = leave them).
@@ -17,7 +22,6 @@ def set_cpu_threads(n: int) -> None:
     """
     if n <= 0:
         return
-    import cv2
 
     if cv2.getNumThreads() != n:
         cv2.setNumThreads(n)
@@ -37,7 +41,6 @@ def _set_blas_threads(n: int) -> None:
     """
     if _BLAS_THREADS == [n]:
         return
-    import ctypes
 
     try:
         with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
@@ -68,7 +71,5 @@ def shorten_switch_interval(ms: float) -> None:
     it over: by default after 5 ms.  With the two images in two workers that wait dominated
     (stereo pair 21 ms at 5 ms, 16 ms at 1 ms; 0.2 ms gains nothing more).
     """
-    import sys
-
     if ms > 0 and sys.getswitchinterval() > 1e-3 * ms:
         sys.setswitchinterval(1e-3 * ms)

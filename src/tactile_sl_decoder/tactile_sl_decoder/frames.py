@@ -5,6 +5,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from tactile_sl_common.bag_io import BagReader, header_stamp_of_cdr
+
 
 @dataclass
 class BagFrame:
@@ -33,8 +35,6 @@ def bag_topics(namespace: str = "/tactile") -> dict[str, str]:
 
 def count_bag_frames(path: str | Path, namespace: str = "/tactile") -> int:
     """Number of left images in a bag (for progress bars)."""
-    from tactile_sl_camera.bag_io import BagReader
-
     reader = BagReader(path)
     topic = bag_topics(namespace)["left_image"]
     return reader.topics[topic].message_count if topic in reader.topics else 0
@@ -50,8 +50,6 @@ def bag_frames(path: str | Path, namespace: str = "/tactile",
     missing camera_info topics unless ``camera_info`` is False (the caller has the
     calibration from elsewhere: the frames' infos are then None where the bag has none).
     """
-    from tactile_sl_camera.bag_io import BagReader, header_stamp_of_cdr
-
     reader = BagReader(path)
     topics = bag_topics(namespace)
     images = [topics["left_image"], topics["right_image"]]

@@ -10,8 +10,11 @@ CameraInfo, degenerate calibration) and problems raise :class:`PipelineInputErro
 message meant for the user; callers skip the frame and carry on.
 
 The stages it composes live in :mod:`.extract`, :mod:`.classify`, :mod:`.decode` and
-:mod:`.stereo`; glyph arrays in :mod:`.glyphs`, bag frames and stereo pairing in
-:mod:`.frames`, library thread settings in :mod:`.cpu_threads` (import them from there).
+:mod:`.stereo` (the stereo stage's own sequence, transfer -> rescue -> triangulation ->
+outliers, is :func:`~tactile_sl_decoder.stereo.pair.pair_points`); what a camera stream keeps
+of its previous frame is :class:`~tactile_sl_decoder.decode.track.StreamMemory`; glyph arrays
+in :mod:`.glyphs`, bag frames and stereo pairing in :mod:`.frames`, library thread settings in
+:mod:`.cpu_threads` (import them from there).
 """
 from __future__ import annotations
 
@@ -23,19 +26,24 @@ from typing import Any, Callable
 
 import numpy as np
 
-from tactile_sl_camera.camera_info import CameraInfoError
-from tactile_sl_camera.clouds import POINT_DTYPE, pack_points
-from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry
+from tactile_sl_common.camera_info import CameraInfoError
+from tactile_sl_decoder.camera_processes import CameraJob, CameraProcesses
+from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry, label_glyphs
+from tactile_sl_decoder.classify.classifier import Classifier
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
 from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
-from tactile_sl_decoder.decode.grid import GridParams, build_grid, nearest_neighbours
-from tactile_sl_decoder.decode.track import carried_cells
+from tactile_sl_decoder.decode.grid import GridParams
+from tactile_sl_decoder.decode.joint import decode_jointly, glyph_neighbours
+from tactile_sl_decoder.decode.track import StreamMemory
+from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
-from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
-from tactile_sl_decoder.stereo.rescue import Rescued, RescueParams, rescue_pair
-from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig, match_and_triangulate
-from tactile_sl_decoder.stereo.transfer import TransferParams, needs_transfer, transfer_cells
+from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
+from tactile_sl_decoder.stereo.outliers import OutlierParams
+from tactile_sl_decoder.stereo.pair import PairSettings, pair_points
+from tactile_sl_decoder.stereo.rescue import RescueParams
+from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig
+from tactile_sl_decoder.stereo.transfer import TransferParams
 
 
 @dataclass
@@ -51,6 +59,8 @@ class PipelineParams:
     rescue: RescueParams = field(default_factory=RescueParams)  # undetected glyphs, images path
     extraction: Any = None          # tactile_sl_decoder.extract.extraction.ExtractionParams
     threads: int = 2                # >1: extract + classify left and right concurrently
+    processes: bool = False         # each camera's extraction + classification in a process
+                                    # of its own (camera_processes.py; a live node's default)
     cpu_threads: int = 1            # OpenCV/torch intra-op threads (process-wide; 0 = leave)
     switch_interval_ms: float = 1.0  # with threads > 1: Python's GIL switch interval at most
                                      # this (process-wide; 0 = leave), see shorten_switch_interval
@@ -97,8 +107,6 @@ class PatternSpec:
     @classmethod
     def load(cls, path: str | Path | None = None) -> "PatternSpec":
         """Load a contract pattern YAML (default: the shipped pattern)."""
-        from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
-
         return cls.from_pattern(load_pattern(path or default_pattern_path()))
 
 
@@ -119,15 +127,18 @@ class StereoPipeline:
         self._extractor = extractor
         self._rig: StereoRig | None = None
         self._rig_key: tuple | None = None
-        # one per camera, sharing params.carry (live changes apply to both)
         self.params.carry.validate()
         self.params.transfer.validate()
         self.params.rescue.validate()
-        self._carry = (LabelCarry(self.params.carry), LabelCarry(self.params.carry))
-        self._prev_cells: list[tuple[np.ndarray, np.ndarray] | None] = [None, None]
-        self._full_decode_in = 0     # frames until the window search runs regardless
+        self.memory = StreamMemory(self.params.carry)   # shares params.carry: live changes
         self._pool = None
-        if self.params.threads > 1:
+        self._procs: CameraProcesses | None = None
+        self.keep_patches = False    # with processes: the glyphs' patches come back too
+        if self.params.processes:
+            self._procs = CameraProcesses(self.params.classifier_weights,
+                                          self.params.classifier_threshold,
+                                          self.params.cpu_threads)
+        elif self.params.threads > 1:
             self._pool = ThreadPoolExecutor(max_workers=2)
             shorten_switch_interval(self.params.switch_interval_ms)
 
@@ -135,21 +146,20 @@ class StereoPipeline:
 
     def _extract(self, gray: np.ndarray) -> Any:
         if self._extractor is None:
-            from tactile_sl_decoder.extract.extraction import extract_symbols
-
             self._extractor = extract_symbols
         return self._extractor(gray, self.params.extraction)
 
     def load_classifier(self) -> Any:
         """The classifier, loaded on first use from ``params.classifier_weights``."""
         if self.classifier is None:
-            from tactile_sl_decoder.classify.classifier import Classifier
-
             self.classifier = Classifier.load(self.params.classifier_weights,
                                               self.params.classifier_threshold)
         return self.classifier
 
-    _classifier = load_classifier
+
+    def _predict(self, patches: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The classifier's labels and confidences of ``patches`` (loaded on first use)."""
+        return self.load_classifier().predict(patches)
 
     def _map(self, fn: Callable[[Any], Any], a: Any, b: Any) -> tuple[Any, Any]:
         if self._pool is None:
@@ -166,55 +176,11 @@ class StereoPipeline:
             return Glyphs.from_detections(det, gray.shape)
         return self._map(run, left_gray, right_gray)
 
-    def _carries(self) -> tuple[LabelCarry | None, LabelCarry | None]:
-        """The two cameras' label carries, or None when carrying is off (then forgotten)."""
-        if self.params.carry.enabled:
-            return self._carry
-        self.forget_frames()
-        return None, None
-
     def forget_frames(self) -> None:
         """Classify and decode the next frame in full (nothing carried from earlier frames)."""
-        for c in self._carry:
-            c.reset()
-        self._prev_cells = [None, None]
-        self._full_decode_in = 0
-
-    def _label(self, images: list[Glyphs], carries: list[LabelCarry | None]) -> int:
-        """Label the glyphs of one or more images (in place), one classifier batch.
-
-        With a :class:`LabelCarry` per image, glyphs that keep the previous frame's label
-        are not classified (classify/carry.py); the classifier sees the others only.
-        Returns the number of glyphs labelled from the previous frame.
-        """
-        work = [(g, c) for g, c in zip(images, carries) if len(g) and g.patches is not None]
-        for g, c in zip(images, carries):
-            if c is not None and not (len(g) and g.patches is not None):
-                c.reset()
-        if not work:
-            return 0
-        patches = [np.asarray(g.patches) for g, _ in work]
-        frames = [c.carry(g.u, g.v, p, g.spacing_px) if c is not None else None
-                  for (g, c), p in zip(work, patches)]
-        todo = [np.flatnonzero(~f.carried) if f is not None else slice(None) for f in frames]
-        batch = [p[t] for p, t in zip(patches, todo)]
-        sizes = [len(b) for b in batch]
-        label, conf = (self._classifier().predict(np.concatenate(batch)) if sum(sizes)
-                       else (np.zeros(0, np.uint8), np.zeros(0, np.float32)))
-        start = carried = 0
-        for (g, c), f, t, k in zip(work, frames, todo, sizes):
-            if f is None:
-                g.label = np.asarray(label[start:start + k], np.uint8)
-                g.confidence = np.asarray(conf[start:start + k], np.float32)
-            else:
-                g.label, g.confidence = f.label.copy(), f.confidence.copy()
-                g.label[t] = label[start:start + k]
-                g.confidence[t] = conf[start:start + k]
-                assert c is not None     # f is None exactly where c is
-                c.remember(f, g.label, g.confidence)
-                carried += int(f.carried.sum())
-            start += k
-        return carried
+        self.memory.forget()
+        if self._procs is not None:
+            self._procs.forget()
 
     def _extract_classify(self, job: tuple[np.ndarray, Any, LabelCarry | None]
                           ) -> tuple[Glyphs, int, float, float, float]:
@@ -230,15 +196,11 @@ class StereoPipeline:
         det = self._extract(gray)
         g = Glyphs.from_detections(det, gray.shape)
         t1 = time.perf_counter()
-        g.neighbours = self._neighbours(g)
+        g.neighbours = glyph_neighbours(g, self.params.grid)
         g.rectified = StereoRig.rectify(cam, np.column_stack([g.u, g.v]).astype(np.float64))
         t2 = time.perf_counter()
-        carried = self._label([g], [carry])
+        carried = label_glyphs([g], [carry], self._predict)
         return g, carried, 1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (time.perf_counter() - t2)
-
-    def _neighbours(self, g: Glyphs) -> tuple[np.ndarray, np.ndarray]:
-        """k-NN table of one image's glyphs (the lattice search's first step)."""
-        return nearest_neighbours(g.u, g.v, self.params.grid.k_neighbours, g.spacing_px)
 
     def classify_pair(self, left: Glyphs, right: Glyphs,
                       carries: tuple[LabelCarry | None, LabelCarry | None] = (None, None)
@@ -248,91 +210,17 @@ class StereoPipeline:
         Returns the number of glyphs labelled from the previous frame.
         """
         if any(len(g) and g.patches is not None for g in (left, right)):
-            self._classifier()
-        return self._label([left, right], list(carries))
-
-    def decode(self, glyphs: Glyphs) -> Glyphs:
-        """Give each glyph of one image its cell (in place; returns it)."""
-        self.decode_many([glyphs])
-        return glyphs
+            self.load_classifier()
+        return label_glyphs([left, right], list(carries), self._predict)
 
     def decode_many(self, images: list[Glyphs],
                     carried: list[np.ndarray] | None = None) -> bool:
         """Decode the glyphs of several images in one pass (in place).
 
-        The images' glyphs are laid side by side, far apart, and go through one lattice
-        search and one decoding call: the cost of these is mostly per numpy operation, so
-        this is much cheaper than one call per image, and the result is the same (nothing
-        links glyphs of different images; cells are unique per image).
-
-        ``carried``: per image, each glyph's cell carried from the previous frame (flat, -1
-        none; :mod:`.decode.track`).  If this frame's lattice and labels confirm every one
-        of them, the glyphs take them and the window search is skipped; returns whether it
-        was (else the frame was decoded in full).
+        See :func:`~tactile_sl_decoder.decode.joint.decode_jointly`; True if the
+        ``carried`` cells were confirmed and the window search skipped.
         """
-        sizes = [len(g) for g in images]
-        if sum(sizes) == 0:
-            return False
-        offsets = []
-        shift = 0.0
-        for g in images:
-            offsets.append(shift)
-            span = float(np.max(g.u)) if len(g) else 0.0
-            shift += max(span, float(g.image_width)) + 1e4       # far beyond any spacing
-        u = np.concatenate([g.u.astype(np.float64) + o for g, o in zip(images, offsets)])
-        v = np.concatenate([g.v.astype(np.float64) for g in images])
-        label = np.concatenate([g.label for g in images])
-        conf = np.concatenate([g.confidence for g in images])
-        groups = np.repeat(np.arange(len(images)), sizes)
-        hints = [g.spacing_px for g in images if g.spacing_px > 0]
-        # k-NN per image (within an image's 3 spacings: never across images), unless a
-        # worker thread already did it; indices shifted to the joint numbering.
-        dists, idxs = [], []
-        start = 0
-        for g, n in zip(images, sizes):
-            dist, idx = g.neighbours if g.neighbours is not None else self._neighbours(g)
-            dists.append(dist)
-            idxs.append(idx + start)
-            start += n
-        grid = build_grid(u, v, self.params.grid, max(hints) if hints else 0.0,
-                          neighbours=(np.concatenate(dists), np.concatenate(idxs)))
-        tracked = False
-        if carried is not None:
-            cell = np.concatenate(carried)
-            ok = self.decoder.confirm(grid, cell, label, conf, groups)
-            tracked = bool(np.all(ok | (cell == -1)))
-        if tracked:
-            cols = self.codebook.cols
-            row = np.where(cell >= 0, cell // cols, -1).astype(np.int32)
-            col = np.where(cell >= 0, cell % cols, -1).astype(np.int32)
-        else:
-            res = self.decoder.decode(grid, label, conf, groups)
-            row, col = res.row, res.col
-        start = 0
-        for g, n in zip(images, sizes):
-            g.row, g.col = row[start:start + n], col[start:start + n]
-            if g.spacing_px <= 0:
-                g.spacing_px = grid.spacing_px
-            start += n
-        return tracked
-
-    def _carried_cells(self, images: list[Glyphs]) -> list[np.ndarray] | None:
-        """Cells carried from the previous frame per image, or None: decode in full.
-
-        In full when cells are not carried, every ``refresh_frames`` frames, or when a glyph
-        has no glyph of the previous frame at its place (new, or moved too far).
-        """
-        p = self.params.carry
-        if not (p.enabled and p.cells) or self._full_decode_in <= 0:
-            return None
-        out = []
-        for g, carry, prev in zip(images, self._carry, self._prev_cells):
-            last = carry.last
-            if prev is None or last is None or len(last.source) != len(g) or np.any(
-                    last.source < 0):
-                return None
-            out.append(carried_cells(last.source, prev[0], prev[1], self.codebook.cols))
-        return out
+        return decode_jointly(images, self.decoder, self.params.grid, carried)
 
     def decode_pair(self, left: Glyphs, right: Glyphs) -> None:
         """Decode both images of a stereo frame (one joint pass)."""
@@ -352,65 +240,6 @@ class StereoPipeline:
             self._rig_key = key
         return self._rig
 
-    def triangulate(self, left: Glyphs, right: Glyphs, rig: StereoRig,
-                    images: tuple[np.ndarray, np.ndarray] | None = None
-                    ) -> tuple[np.ndarray, int, tuple[int, int]]:
-        """Contract points, rejected pairs, and per image the cells from the other camera.
-
-        The last is :attr:`StereoResult.assisted`.
-
-        First a glyph one image could not decode takes the cell the other image decoded
-        where the pair's geometry puts it (:func:`~.stereo.transfer.transfer_cells`); the
-        images' ``row`` / ``col`` are then new arrays (the decoder's own cells, carried to
-        the next frame, stay as decoded).  With the grey ``images``, a cell one image
-        decoded and the other holds no glyph for is then measured in that image where the
-        other puts it (:func:`~.stereo.rescue.rescue_pair`; the glyph arrays stay as
-        extracted).
-        """
-        ncols = self.codebook.cols
-        assisted = (0, 0)
-        uv_l = np.column_stack([left.u, left.v]).astype(np.float64)
-        uv_r = np.column_stack([right.u, right.v]).astype(np.float64)
-        rect_l, rect_r = left.rectified, right.rectified
-        if rect_l is None or rect_r is None or len(rect_l) != len(uv_l) or len(rect_r) != len(
-                uv_r):
-            rect_l = rect_r = None                       # rectify the matched ones only
-        if self.params.transfer.enabled and len(uv_l) and len(uv_r) and needs_transfer(
-                left, right):
-            if rect_l is None or rect_r is None:
-                rect_l = StereoRig.rectify(rig.left, uv_l)
-                rect_r = StereoRig.rectify(rig.right, uv_r)
-            before = [int(np.count_nonzero(g.row >= 0)) for g in (left, right)]
-            for g in (left, right):
-                g.row, g.col = g.row.copy(), g.col.copy()
-            if transfer_cells(left, right, rect_l, rect_r, self.pattern.array,
-                              self.params.transfer):
-                assisted = (int(np.count_nonzero(left.row >= 0)) - before[0],
-                            int(np.count_nonzero(right.row >= 0)) - before[1])
-        cl = np.where(left.row >= 0, left.row.astype(np.int64) * ncols + left.col, -1)
-        cr = np.where(right.row >= 0, right.row.astype(np.int64) * ncols + right.col, -1)
-        if images is not None and self.params.rescue.enabled and len(uv_l) and len(uv_r):
-            extraction = self.params.extraction or _default_extraction()
-            predict = self._classifier().predict
-            found = rescue_pair(left, right, images, self.pattern.array, extraction, predict,
-                                self.params.rescue)
-            if len(found[0].cell) or len(found[1].cell):
-                uv_l, cl, rect_l = _with_rescued(uv_l, cl, rect_l, found[0], rig.left)
-                uv_r, cr, rect_r = _with_rescued(uv_r, cr, rect_r, found[1], rig.right)
-                assisted = (assisted[0] + len(found[0].cell),
-                            assisted[1] + len(found[1].cell))
-        m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, self.params.stereo,
-                                  rect_l, rect_r)
-        # Points off the smooth surface their lattice neighbours define are dropped: a glyph
-        # centre pulled aside in one image (shadow edge, dust, texture) or a wrong cell.
-        off = surface_outliers(m.xyz, m.row, m.col, (self.codebook.rows, ncols),
-                               self.params.outliers)
-        if off.any():
-            keep = ~off
-            return (pack_points(m.xyz[keep], m.row[keep], m.col[keep]),
-                    m.rejected + int(off.sum()), assisted)
-        return pack_points(m.xyz, m.row, m.col), m.rejected, assisted
-
     # ------------------------------------------------------------------ whole frames
 
     def process(self, left_gray: np.ndarray, right_gray: np.ndarray, left_info: Any,
@@ -425,16 +254,20 @@ class StereoPipeline:
         check_image(left_gray, rig.left, "left")
         check_image(right_gray, rig.right, "right")
         t1 = time.perf_counter()
-        if self._pool is None:
+        matches = None
+        if self._procs is not None:
+            (left, right), carried, matches, worker_ms = self._in_processes(
+                left_gray, right_gray, rig)
+        elif self._pool is None:
             left, right = self.extract_pair(left_gray, right_gray)
             t2 = time.perf_counter()
-            carried = self.classify_pair(left, right, self._carries())
+            carried = self.classify_pair(left, right, self.memory.label_carries())
         else:
             # One worker per image: extraction, the lattice's k-NN search and classification
             # of that image (OpenCV, the k-d tree and the classifier's matrix products
             # release the GIL).  The stage times are then the slower worker's (overlapping).
-            self._classifier()
-            carry_l, carry_r = self._carries()
+            self.load_classifier()
+            carry_l, carry_r = self.memory.label_carries()
             (left, carried_l, *ms_l), (right, carried_r, *ms_r) = self._map(
                 self._extract_classify, (left_gray, rig.left, carry_l),
                 (right_gray, rig.right, carry_r))
@@ -443,9 +276,10 @@ class StereoPipeline:
         if label_hook is not None:
             label_hook(left, right)
         t3 = time.perf_counter()
-        result = self._finish(left, right, rig, track=True, images=(left_gray, right_gray))
+        result = self._finish(left, right, rig, track=True, images=(left_gray, right_gray),
+                              matches=matches)
         result.carried = carried
-        if self._pool is None:
+        if self._pool is None and self._procs is None:
             result.timings_ms.update(check=1e3 * (t1 - t0), extract=1e3 * (t2 - t1),
                                      classify=1e3 * (t3 - t2))
         else:
@@ -486,51 +320,60 @@ class StereoPipeline:
 
     def _finish(self, left: Glyphs, right: Glyphs, rig: StereoRig,
                 track: bool = False,
-                images: tuple[np.ndarray, np.ndarray] | None = None) -> StereoResult:
+                images: tuple[np.ndarray, np.ndarray] | None = None,
+                matches: tuple[Any, Any] | None = None) -> StereoResult:
         """Decode, pair and triangulate.
 
         ``track``: the frames of a camera stream (images path), whose cells may be carried
-        from the frame before (:meth:`decode_many`).
+        from the frame before (:meth:`decode_many`); ``matches``: the cameras' matches to
+        their previous frames when worker processes made them.
         """
         t0 = time.perf_counter()
         tracked = False
         if track:
-            tracked = self.decode_many([left, right], self._carried_cells([left, right]))
-            self._prev_cells = [(g.row, g.col) for g in (left, right)]
-            self._full_decode_in = (self._full_decode_in - 1 if tracked
-                                    else self.params.carry.refresh_frames - 1)
+            tracked = self.decode_many([left, right],
+                                       self.memory.carried_cells([left, right],
+                                                                 self.codebook.cols, matches))
+            self.memory.remember([left, right], tracked)
         else:
             self.decode_pair(left, right)
         t1 = time.perf_counter()
-        points, rejected, assisted = self.triangulate(left, right, rig, images)
+        p = self.params
+        pair = pair_points(left, right, rig, self.pattern.array,
+                           PairSettings(p.transfer, p.rescue, p.stereo, p.outliers,
+                                        p.extraction),
+                           self._predict, images)
         t2 = time.perf_counter()
-        result = StereoResult(points, left, right,
+        result = StereoResult(pair.points, left, right,
                               {"decode": 1e3 * (t1 - t0), "stereo": 1e3 * (t2 - t1)},
-                              rejected, rig.frame_id, assisted=assisted)
+                              pair.rejected, rig.frame_id, assisted=pair.assisted)
         result.tracked = tracked
         return result
 
+    def _in_processes(self, left_gray: np.ndarray, right_gray: np.ndarray, rig: StereoRig
+                      ) -> tuple[tuple[Glyphs, Glyphs], int, tuple[Any, Any], list[float]]:
+        """Both images' halves in the camera worker processes (camera_processes.py)."""
+        assert self._procs is not None
+        classifier = self.load_classifier()       # here too: rescue classifies
+        p = self.params
+        if not p.carry.enabled:
+            self.memory.forget()
+        carry = p.carry if p.carry.enabled else None
+        jobs = tuple(CameraJob(gray.shape, p.extraction, p.grid, carry, classifier.threshold,
+                               self.keep_patches) for gray in (left_gray, right_gray))
+        rl, rr = self._procs.run((left_gray, right_gray), (rig.left, rig.right),
+                                 (jobs[0], jobs[1]))
+        ms = [max(a, b) for a, b in zip(rl.timings_ms, rr.timings_ms)]
+        return (rl.glyphs, rr.glyphs), rl.carried + rr.carried, (rl.match, rr.match), ms
+
     def close(self) -> None:
-        """Stop the worker thread."""
+        """Stop the worker thread or processes."""
         if self._pool is not None:
             self._pool.shutdown(wait=False)
             self._pool = None
-
-
-def _default_extraction() -> Any:
-    from tactile_sl_decoder.extract.extraction import ExtractionParams
-
-    return ExtractionParams()
-
-
-def _with_rescued(uv: np.ndarray, cell: np.ndarray, rect: np.ndarray | None, found: Rescued,
-                  cam: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """One image's centres, cells and rectified centres with its rescued glyphs appended."""
-    if len(found.cell) == 0:
-        return uv, cell, rect
-    if rect is not None:
-        rect = np.concatenate([rect, StereoRig.rectify(cam, found.uv)])
-    return np.concatenate([uv, found.uv]), np.concatenate([cell, found.cell]), rect
+        if self._procs is not None:
+            self._procs.close()
+            self._procs = None
 
 
 def _info_key(info: Any) -> tuple:
@@ -558,8 +401,3 @@ def check_image(gray: np.ndarray, cam: Any, side: str) -> None:
     if (w, h) != (cam.width, cam.height):
         raise PipelineInputError(f"{side} image is {w}x{h} but its CameraInfo says "
                                  f"{cam.width}x{cam.height}")
-
-
-def empty_points() -> np.ndarray:
-    """A cloud with no point (frames that decoded nothing)."""
-    return np.zeros(0, dtype=POINT_DTYPE)

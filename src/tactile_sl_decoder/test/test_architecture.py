@@ -1,9 +1,13 @@
-"""Dependency rules of tactile_sl_decoder (docs/architecture.md), read from the imports.
+"""Dependency rules of the tactile-sl packages (docs/architecture.md), read from the imports.
 
-Data flows one way, image -> glyphs -> labels -> cells -> points -> touch: a stage imports
-no rclpy, no node, no CLI and no tooling, and never a later stage.  The shared library
-modules the stages and the pipeline build on follow the same rule.  Every import counts,
-including those inside functions (read with :mod:`ast`, nothing is imported).
+Packages depend one way: ``tactile_sl_msgs`` <- ``tactile_sl_common`` <- {``tactile_sl_camera``,
+``tactile_sl_sim``, ``tactile_sl_decoder``}; in the decoder only ``cli/``, ``tooling/`` and
+``calibrate/simulate.py`` use the simulator, and nothing of it uses the camera package.
+Inside the decoder, data flows one way, image -> glyphs -> labels -> cells -> points -> touch:
+a stage imports no rclpy, no node, no CLI, no tooling, no image source and no simulator, and
+never a later stage.  The shared library modules the stages and the pipeline build on follow
+the same rule.  Every import counts, including those inside functions (read with
+:mod:`ast`, nothing is imported).
 """
 from __future__ import annotations
 
@@ -20,12 +24,25 @@ NAME = "tactile_sl_decoder"
 
 STAGES = ["extract", "classify", "decode", "stereo", "touch"]   # in data-flow order
 SHARED = ["pipeline.py", "glyphs.py", "frames.py", "symbol_array.py", "checks.py",
-          "cpu_threads.py", "contract.py"]
-FORBIDDEN = ("rclpy", f"{NAME}.nodes", f"{NAME}.cli", f"{NAME}.tooling", "tactile_sl_camera.nodes")
+          "cpu_threads.py", "contract.py", "sensor_step.py"]
+FORBIDDEN = ("rclpy", f"{NAME}.nodes", f"{NAME}.cli", f"{NAME}.tooling",
+             "tactile_sl_common.nodes", "tactile_sl_camera", "tactile_sl_sim")
+
+# The package graph: the tactile-sl packages each package's modules may import besides itself.
+PACKAGE_DEPENDENCIES: dict[str, frozenset[str]] = {
+    "tactile_sl_common": frozenset({"tactile_sl_msgs"}),
+    "tactile_sl_camera": frozenset({"tactile_sl_msgs", "tactile_sl_common"}),
+    "tactile_sl_sim": frozenset({"tactile_sl_msgs", "tactile_sl_common"}),
+    "tactile_sl_decoder": frozenset({"tactile_sl_msgs", "tactile_sl_common", "tactile_sl_sim"}),
+    "tactile_sl_viewer": frozenset({"tactile_sl_msgs", "tactile_sl_common", "tactile_sl_decoder"}),
+}
+# Inside the decoder, the simulator is for these only (paths under tactile_sl_decoder/).
+SIMULATOR_USERS = ("cli/", "tooling/", "calibrate/simulate.py")
+OUR_PACKAGE = re.compile(r"^tactile_sl_[a-z]+")
 
 
-def _module_name(path: pathlib.Path) -> str:
-    parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
+def _module_name(path: pathlib.Path, package_root: pathlib.Path = PKG.parent) -> str:
+    parts = list(path.relative_to(package_root).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
     return ".".join(parts)
@@ -54,6 +71,68 @@ def imports_of(path: pathlib.Path, module_name: str | None = None) -> set[str]:
             # `from pkg import sub` may import a submodule: count pkg.sub too
             found.update(f"{module}.{alias.name}" for alias in node.names)
     return found
+
+
+def package_graph_violations(src: pathlib.Path) -> list[str]:
+    """Imports under ``src`` (a colcon ``src/`` folder) that the package graph forbids.
+
+    A package's modules and its tests may import only the packages it depends on
+    (:data:`PACKAGE_DEPENDENCIES`); of the decoder's modules only :data:`SIMULATOR_USERS`
+    import the simulator.
+    """
+    bad = []
+    for package, allowed in PACKAGE_DEPENDENCIES.items():
+        root = src / package
+        for path in sorted(root.rglob("*.py")):
+            rel = path.relative_to(root)
+            if rel.parts[0] not in (package, "test"):
+                continue                         # setup.py, launch files: no imports of ours
+            inside = rel.relative_to(package).as_posix() if rel.parts[0] == package else ""
+            first: dict[str, str] = {}        # each other package once per file
+            for name in sorted(imports_of(path, _module_name(path, root))):
+                top = OUR_PACKAGE.match(name)
+                if top is not None and top.group(0) != package:
+                    first.setdefault(top.group(0), name)
+            for other, name in first.items():
+                if other not in allowed:
+                    bad.append(f"{package}/{rel.as_posix()} imports {name}: {package} does not "
+                               f"depend on {other}")
+                elif (other == "tactile_sl_sim" and rel.parts[0] == package
+                      and not inside.startswith(SIMULATOR_USERS)):
+                    bad.append(f"{package}/{rel.as_posix()} imports {name}: only "
+                               f"{', '.join(SIMULATOR_USERS)} use the simulator")
+    return bad
+
+
+def test_packages_depend_one_way():
+    bad = package_graph_violations(REPO / "src")
+    assert not bad, "\n".join(bad)
+
+
+def _write(path: pathlib.Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+def test_the_package_graph_checker_fails_on_a_forbidden_import(tmp_path):
+    """A tree with one import of each forbidden kind: each is reported, nothing else."""
+    src = tmp_path / "src"
+    _write(src / "tactile_sl_common/tactile_sl_common/ok.py", "import tactile_sl_msgs.msg\n")
+    _write(src / "tactile_sl_common/tactile_sl_common/up.py",
+           "def f():\n    from tactile_sl_decoder import pipeline\n")
+    _write(src / "tactile_sl_camera/tactile_sl_camera/across.py", "import tactile_sl_sim.render\n")
+    _write(src / "tactile_sl_sim/test/test_x.py", "from tactile_sl_camera import replay\n")
+    _write(src / "tactile_sl_decoder/tactile_sl_decoder/cli/ok.py",
+           "import tactile_sl_sim.render\n")
+    _write(src / "tactile_sl_decoder/tactile_sl_decoder/touch/sim.py",
+           "from tactile_sl_sim.loads import LoadContact\n")
+    _write(src / "tactile_sl_decoder/tactile_sl_decoder/nodes/cam.py",
+           "from tactile_sl_camera.replay import ReplayPlan\n")
+    bad = package_graph_violations(src)
+    assert len(bad) == 5, bad
+    for where in ("tactile_sl_common/up.py", "tactile_sl_camera/across.py",
+                  "test/test_x.py", "touch/sim.py", "nodes/cam.py"):
+        assert any(where in b for b in bad), (where, bad)
 
 
 def _is_under(name: str, prefix: str) -> bool:
@@ -121,6 +200,43 @@ def test_the_checker_sees_violations(tmp_path):
     assert f"{NAME}.nodes.decoder_node" in names
 
 
+LAZY_IMPORTS = ("torch", "tactile_sl_decoder.classify.model")
+"""What a function may import itself: torch (1-2 s) is for training and old weight files only,
+and the nodes and the other commands must not pay for it.  Everything else is imported at the
+top of its module (the CLI imports only the module of the command it runs)."""
+
+
+def function_local_imports(path: pathlib.Path) -> list[tuple[int, str]]:
+    """(line, module) of every import inside a function of ``path``."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            for sub in ast.walk(node):
+                if isinstance(sub, ast.Import):
+                    found += [(sub.lineno, alias.name) for alias in sub.names]
+                elif isinstance(sub, ast.ImportFrom):
+                    found.append((sub.lineno, "." * sub.level + (sub.module or "")))
+    return sorted(set(found))
+
+
+def test_functions_import_only_what_start_up_time_keeps_out_of_the_module_top():
+    bad = []
+    for package in PACKAGE_DEPENDENCIES:
+        root = REPO / "src" / package
+        for path in sorted((root / package).rglob("*.py")):
+            bad += [f"{path.relative_to(REPO)}:{line} imports {name} in a function"
+                    for line, name in function_local_imports(path)
+                    if not any(_is_under(name, lazy) for lazy in LAZY_IMPORTS)]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_local_import_reader_sees_nested_and_relative_imports(tmp_path):
+    probe = tmp_path / "probe.py"
+    probe.write_text("import os\n"
+                     "def f():\n    def g():\n        from ..x import y\n    import torch\n")
+    assert function_local_imports(probe) == [(4, "..x"), (5, "torch")]
+
+
 CONTRACT_NAMES = {"LABEL_UNKNOWN", "CELL_UNKNOWN", "PATCH_SIZE", "PATCH", "SLIP_NO_CONTACT",
                   "SLIP_STICK", "SLIP_PARTIAL", "SLIP_GROSS"}
 
@@ -154,9 +270,8 @@ def test_contract_mirrors_the_slip_message():
                                      msg.Slip.STATE_PARTIAL_SLIP, msg.Slip.STATE_GROSS_SLIP)
 
 
-SOURCE_ROOTS = {"tactile_sl_decoder": REPO / "src" / "tactile_sl_decoder",
-                "tactile_sl_camera": REPO / "src" / "tactile_sl_camera"}
-DOTTED = re.compile(r"\btactile_sl_(?:decoder|camera|msgs)(?:\.[A-Za-z_]\w*)+")
+SOURCE_ROOTS = {name: REPO / "src" / name for name in PACKAGE_DEPENDENCIES}
+DOTTED = re.compile(r"\btactile_sl_(?:decoder|camera|common|sim|msgs)(?:\.[A-Za-z_]\w*)+")
 RELATIVE_MOD = re.compile(r":mod:`(\.+[A-Za-z_][\w.]*)`")   # :mod:`.solve` in a package module
 
 
@@ -251,7 +366,7 @@ def _absolute(relative: str, package: list[str]) -> str:
 def test_dotted_name_checker_tells_real_from_stale():
     assert dotted_name_exists("tactile_sl_decoder.decode.grid")
     assert dotted_name_exists("tactile_sl_decoder.pipeline.StereoPipeline.process")
-    assert dotted_name_exists("tactile_sl_camera.bag_io")
+    assert dotted_name_exists("tactile_sl_common.bag_io")
     assert dotted_name_exists("tactile_sl_msgs.msg.SymbolArray")
     assert not dotted_name_exists("tactile_sl_decoder.grid")          # moved to decode/
     assert not dotted_name_exists("tactile_sl_decoder.pipeline.NoSuchThing")

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from tactile_sl_camera.images import to_gray
+from tactile_sl_common.images import to_gray
 from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry
 from tactile_sl_decoder.contract import LABEL_UNKNOWN, PATCH_SIZE
 from tactile_sl_decoder.frames import bag_frames

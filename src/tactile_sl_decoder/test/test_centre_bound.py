@@ -2,13 +2,13 @@
 import numpy as np
 import pytest
 
-from tactile_sl_camera.sim.optics import RigParams, SimulatedCameraPair
 from tactile_sl_decoder.stereo.stereo import StereoRig
 from tactile_sl_decoder.tooling.centre_bound import (
     best_share_rmse,
     centre_covariance_bound,
     point_error_bound,
 )
+from tactile_sl_sim.optics import RigParams, SimulatedCameraPair
 
 SIZE = 41
 CENTRE = (20.3, 19.6)
@@ -105,8 +105,10 @@ def test_best_share_rmse_keeps_the_smallest_bounds():
 def test_frame_bounds_of_a_simulated_press_scale_with_the_read_noise():
     """Read noise only: the information is 1 / sigma^2, so doubling sigma quadruples every
     glyph's bound exactly; every visible glyph gets a finite, plausible one."""
-    from tactile_sl_camera.sim import Contact, Nuisances, Renderer, load_artwork
     from tactile_sl_decoder.tooling.centre_bound import frame_point_bounds
+    from tactile_sl_sim.artwork import load_artwork
+    from tactile_sl_sim.contact import Contact
+    from tactile_sl_sim.render import Nuisances, Renderer
 
     renderer = Renderer(load_artwork())
     rig = StereoRig(renderer.rig.left_info, renderer.rig.right_info)

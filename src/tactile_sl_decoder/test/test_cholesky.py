@@ -48,7 +48,7 @@ def test_the_traction_solver_never_uses_scipys_gil_holding_cholesky(monkeypatch)
         raise AssertionError("scipy.linalg.cho_* holds the GIL for the whole call")
     monkeypatch.setattr(scipy.linalg, "cho_factor", refuse)
     monkeypatch.setattr(scipy.linalg, "cho_solve", refuse)
-    from tactile_sl_camera.elasticity import Elastomer
+    from tactile_sl_common.elasticity import Elastomer
 
     solver = traction.TractionSolver(Elastomer(3e5, 0.49, 0.0), 5e-4, (6, 5), np.arange(30))
     assert solver.area_fraction > 0

@@ -10,9 +10,9 @@ from tactile_sl_decoder.extract.extraction import (
     Detections,
     ExtractionParams,
     extract_symbols,
-    sample_patches,
     threshold_ink,
 )
+from tactile_sl_decoder.extract.patches import sample_patches
 from tactile_sl_decoder.extract.spacing import estimate_spacing
 from tactile_sl_decoder.tooling.synth_glyphs import finish, render_at, synth_image
 

@@ -50,7 +50,7 @@ def test_score_image_counts():
 
 
 def test_project_truth_identity_rig():
-    from tactile_sl_camera.camera_info import CameraCalibration
+    from tactile_sl_common.camera_info import CameraCalibration
 
     K = np.array([[500.0, 0, 320], [0, 500.0, 240], [0, 0, 1]])
     left = CameraCalibration(640, 480, K, np.zeros(5), np.eye(3), np.hstack([K, np.zeros((3, 1))]))

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from tactile_sl_camera.elasticity import Elastomer, surface_displacement
+from tactile_sl_common.elasticity import Elastomer, surface_displacement
 from tactile_sl_decoder.touch.hertz_response import (
     half_space_functions,
     hertz_response,

@@ -10,8 +10,8 @@ PACKAGE = Path(jit.__file__).parent
 
 def test_every_kernel_module_is_warmed_at_setup():
     for info in pkgutil.walk_packages([str(PACKAGE)], "tactile_sl_decoder."):
-        if ".nodes" in info.name or info.name.endswith("__main__"):
-            continue                      # rclpy shells: no kernels there
+        if ".nodes" in info.name or ".cli" in info.name or info.name.endswith("__main__"):
+            continue                      # rclpy and command-line shells: no kernels there
         importlib.import_module(info.name)
     defined = {k.py_func.__module__ for k in jit.compiled_kernels()}
     assert defined, "no kernel found"

@@ -15,7 +15,7 @@ from tactile_sl_decoder.pattern.shapes import GLYPHS, INK_AREA, default_primitiv
 
 from ros_harness import REPO
 
-CAMERA_ARTWORK = REPO / "src" / "tactile_sl_camera" / "artwork" / "pattern.png"
+CAMERA_ARTWORK = REPO / "src" / "tactile_sl_sim" / "artwork" / "pattern.png"
 
 
 @pytest.mark.parametrize("name", list(GLYPHS))

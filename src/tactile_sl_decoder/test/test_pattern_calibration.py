@@ -11,14 +11,11 @@ import cv2
 import numpy as np
 import pytest
 
-from tactile_sl_camera.calibration import simulated_board_views
-from tactile_sl_camera.camera_info import (
+from tactile_sl_common.camera_info import (
     CameraCalibration,
     load_camera_info_yaml,
     save_camera_info_yaml,
 )
-from tactile_sl_camera.sim.artwork import Artwork, draw_artwork, random_values
-from tactile_sl_camera.sim.render import Renderer
 from tactile_sl_decoder.calibrate import (
     CalibrationOptions,
     PatternTarget,
@@ -31,11 +28,14 @@ from tactile_sl_decoder.calibrate.simulate import (
     artwork_of,
     random_poses,
     render_pattern_views,
+    simulated_board_views,
     write_untouched_bag,
     write_views,
 )
 from tactile_sl_decoder.cli import calibrate_cmd
 from tactile_sl_decoder.stereo.stereo import StereoRig
+from tactile_sl_sim.artwork import Artwork, draw_artwork, random_values
+from tactile_sl_sim.render import Renderer
 
 # Renders and calibrates from simulated views (seconds per fixture): `make test`, not
 # `make unit`.
@@ -315,7 +315,7 @@ def test_check_and_refine_take_the_calibration_files_for_a_bag_without_camera_in
         untouched_bag, renderer, tmp_path, capsys):
     """Item 10: --check / --refine demanded the bag's camera_info topics although
     --calibration DIR (or --left-info / --right-info) gave the calibration."""
-    from tactile_sl_camera.bag_io import BagReader, BagWriter
+    from tactile_sl_common.bag_io import BagReader, BagWriter
 
     bag = tmp_path / "images_only.mcap"
     with BagWriter(bag) as out:

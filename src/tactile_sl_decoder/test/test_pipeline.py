@@ -6,10 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
-from tactile_sl_camera.bag_io import BagReader, BagWriter
-from tactile_sl_camera.camera_info import CameraCalibration, camera_info_fields
-from tactile_sl_camera.clouds import cloud_fields, cloud_to_arrays, pack_points
-from tactile_sl_camera.images import image_fields
+from tactile_sl_common.bag_io import BagReader, BagWriter
+from tactile_sl_common.camera_info import CameraCalibration, camera_info_fields
+from tactile_sl_common.clouds import cloud_fields, cloud_to_arrays, pack_points
+from tactile_sl_common.images import image_fields
 from tactile_sl_decoder.frames import StampThrottle, StereoSync, bag_frames
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
@@ -19,7 +19,7 @@ from tactile_sl_decoder.tooling.e2e_metrics import aggregate, frame_metrics
 from ros_harness import REPO
 from small_patterns import make_pattern
 
-ARTWORK = REPO / "src" / "tactile_sl_camera" / "artwork" / "pattern.png.yaml"
+ARTWORK = REPO / "src" / "tactile_sl_sim" / "artwork" / "pattern.png.yaml"
 
 
 PATTERN = PatternSpec(make_pattern(), (3, 3), 3, 3, 0.0005)

@@ -37,8 +37,8 @@ def _bag_with_bad_images(path: Path, kind: str, bad_frames: set[int], frames: in
     import cv2
     import numpy as np
 
-    from tactile_sl_camera.bag_io import BagReader, BagWriter
-    from tactile_sl_camera.images import image_to_array
+    from tactile_sl_common.bag_io import BagReader, BagWriter
+    from tactile_sl_common.images import image_to_array
 
     topics = IMAGE_TOPICS + ["/tactile/ground_truth/points"]
     stamps: list[int] = []

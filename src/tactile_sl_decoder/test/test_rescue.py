@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tactile_sl_camera.images import to_gray
+from tactile_sl_common.images import to_gray
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.extract.extraction import Detections, ExtractionParams, extract_symbols
 from tactile_sl_decoder.frames import bag_frames

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tactile_sl_camera.bag_io import BagError, BagReader, BagWriter
+from tactile_sl_common.bag_io import BagError, BagReader, BagWriter
 from tactile_sl_decoder.cli import main
 from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
 from tactile_sl_decoder.pattern.fileio import PatternInvalidError

@@ -3,7 +3,6 @@ import math
 
 import pytest
 
-from tactile_sl_camera.sim.friction import cattaneo_mindlin
 from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_PARTIAL, SLIP_STICK
 from tactile_sl_decoder.tooling.slip_metrics import (
     SlipFrame,
@@ -11,6 +10,7 @@ from tactile_sl_decoder.tooling.slip_metrics import (
     format_slip_report,
 )
 from tactile_sl_decoder.touch.slip import SlipEstimate
+from tactile_sl_sim.friction import cattaneo_mindlin
 
 
 def _frame(ratio: float, state: int, margin: float, friction: float, stamp: int = 0,

@@ -3,7 +3,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tactile_sl_camera.camera_info import CameraCalibration, CameraInfoError, camera_info_fields
+from tactile_sl_common.camera_info import CameraCalibration, CameraInfoError, camera_info_fields
 from tactile_sl_decoder.stereo.stereo import StereoRig, match_and_triangulate
 
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from test_touch_traction import PITCH, SHAPE, _displacement
 
-from tactile_sl_camera.clouds import pack_points
-from tactile_sl_camera.elasticity import Elastomer
+from tactile_sl_common.clouds import pack_points
+from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_decoder.cli import main as cli_main
 from tactile_sl_decoder.touch.force_calibration import (
     ForceCalibrationError,

@@ -7,8 +7,7 @@ import shutil
 import numpy as np
 import pytest
 
-from tactile_sl_camera.clouds import pack_field
-from tactile_sl_camera.sim.loads import TouchTruth
+from tactile_sl_common.clouds import pack_field
 from tactile_sl_decoder.cli.evaluate_cmd import touch_section
 from tactile_sl_decoder.tooling.pictures import render_depth, render_pressure
 from tactile_sl_decoder.tooling.touch_metrics import (
@@ -21,6 +20,7 @@ from tactile_sl_decoder.tooling.touch_metrics import (
 )
 from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.stage import TouchResult
+from tactile_sl_sim.loads import TouchTruth
 
 from ros_harness import REPO
 

@@ -3,7 +3,7 @@
 The pressures of the simulator's load contacts (a sphere's Hertz pressure, a rigid flat
 punch's, infinite at its rim, a cylinder lying on the pad, and two contacts at once) are
 pushed through the elastic half-space on a 10x finer grid than the cells
-(:func:`tactile_sl_camera.elasticity.surface_displacement`, not the cell kernel the stage
+(:func:`tactile_sl_common.elasticity.surface_displacement`, not the cell kernel the stage
 inverts), sampled at the cell centres with the decoder's noise (0.75 um across, 2.5 um along
 the depth), and given to the touch stage.  The truth is the simulator's (area where the
 traction presses, largest indentation of the fine grid).  Before issue 25 the area came from
@@ -14,8 +14,8 @@ import pytest
 from test_touch_stage import _points
 from test_touch_traction import PITCH, SHAPE
 
-from tactile_sl_camera.elasticity import Elastomer, surface_displacement
-from tactile_sl_camera.sim.loads import LoadContact, touch_truth
+from tactile_sl_common.elasticity import Elastomer, surface_displacement
+from tactile_sl_sim.loads import LoadContact, touch_truth
 from tactile_sl_decoder.touch.sensor import SensorConfig
 from tactile_sl_decoder.touch.stage import TouchStage
 

@@ -10,10 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from tactile_sl_camera.clouds import pack_points
-from tactile_sl_camera.elasticity import Elastomer
-from tactile_sl_camera.sim.contact import FieldGrid, PadParams
-from tactile_sl_camera.sim.loads import LoadContact, strongest_slip
+from tactile_sl_common.clouds import pack_points
+from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_NO_CONTACT, SLIP_PARTIAL, SLIP_STICK
 from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.messages import slip_fields, slip_markers
@@ -21,6 +19,8 @@ from tactile_sl_decoder.touch.reference import nominal_positions
 from tactile_sl_decoder.touch.sensor import SensorConfig
 from tactile_sl_decoder.touch.slip import SlipEstimate, SlipEstimator, SlipParams
 from tactile_sl_decoder.touch.stage import TouchStage
+from tactile_sl_sim.contact import FieldGrid, PadParams
+from tactile_sl_sim.loads import LoadContact, strongest_slip
 
 SHAPE, PITCH = (28, 30), 5e-4
 HALF = Elastomer(3.0e5, 0.49, 0.0)

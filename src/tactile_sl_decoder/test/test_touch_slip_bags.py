@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from tactile_sl_camera.bag_io import BagReader
+from tactile_sl_common.bag_io import BagReader
 from tactile_sl_decoder.cli import main as cli_main
 from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_PARTIAL, SLIP_STICK
 

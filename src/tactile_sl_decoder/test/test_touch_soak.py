@@ -1,5 +1,5 @@
 """The live touch checks of tools/soak_touch.py and tests/test_touch_live.py."""
-from tactile_sl_camera.bag_io import BagReader
+from tactile_sl_common.bag_io import BagReader
 from tactile_sl_decoder.frames import bag_frames
 from tactile_sl_decoder.tooling.touch_soak import (
     ContactCheck,

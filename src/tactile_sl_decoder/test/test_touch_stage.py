@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from test_touch_traction import PITCH, SHAPE, _displacement
 
-from tactile_sl_camera.clouds import pack_points
-from tactile_sl_camera.elasticity import Elastomer
+from tactile_sl_common.clouds import pack_points
+from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_decoder.touch.messages import touch_messages
 from tactile_sl_decoder.touch.reference import nominal_positions
 from tactile_sl_decoder.touch.sensor import SensorConfig
@@ -14,6 +14,10 @@ ROT = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]) @ np.array(
     [[1, 0, 0], [0, np.cos(0.05), -np.sin(0.05)], [0, np.sin(0.05), np.cos(0.05)]])
 T = np.array([2e-4, -1e-4, 0.015])
 
+
+# A live stage computes its inversion (no disk cache): a reference read back from the cache
+# would be ready before the queue of frames waiting for it could be exercised.
+LIVE = TouchParams(reference_frames=1, solver_cache=False)
 
 def _points(disp, drop=()):
     rows, cols = np.divmod(np.arange(SHAPE[0] * SHAPE[1]), SHAPE[1])
@@ -110,8 +114,7 @@ def test_contact_area_of_a_hertz_load(thickness):
 def test_background_reference_gives_the_same_outputs_without_blocking_frames():
     sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
     inline = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1))
-    live = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1),
-                      background=True)
+    live = TouchStage(sensor, SHAPE, PITCH, params=LIVE, background=True)
     rng = np.random.default_rng(3)
     rest = _points(_displacement(sensor.elastomer, [], 2e-6, rng))
     assert inline.update(rest) is None and inline.ready
@@ -131,8 +134,7 @@ def test_background_reference_gives_the_same_outputs_without_blocking_frames():
 
 def test_a_tare_drops_a_reference_still_being_prepared():
     sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
-    live = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1),
-                      background=True)
+    live = TouchStage(sensor, SHAPE, PITCH, params=LIVE, background=True)
     rng = np.random.default_rng(4)
     assert live.update(_points(_displacement(sensor.elastomer, [], 2e-6, rng))) is None
     old = live._preparing
@@ -154,8 +156,7 @@ def test_frames_during_a_background_preparation_get_their_outputs_in_order():
     """Frames that come while the reference is prepared are queued, then given outputs."""
     sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
     inline = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1))
-    live = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1),
-                      background=True)
+    live = TouchStage(sensor, SHAPE, PITCH, params=LIVE, background=True)
     rng = np.random.default_rng(5)
     rest = _points(_displacement(sensor.elastomer, [], 2e-6, rng))
     inline.update(rest)
@@ -183,7 +184,8 @@ def test_frames_during_a_background_preparation_get_their_outputs_in_order():
 def test_the_pending_queue_is_bounded_and_cleared_by_a_tare():
     sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
     live = TouchStage(sensor, SHAPE, PITCH,
-                      params=TouchParams(reference_frames=1, max_pending_frames=2),
+                      params=TouchParams(reference_frames=1, max_pending_frames=2,
+                                         solver_cache=False),
                       background=True)
     rng = np.random.default_rng(6)
     live.update(_points(_displacement(sensor.elastomer, [], 2e-6, rng)))
@@ -204,8 +206,7 @@ def test_the_pending_queue_is_bounded_and_cleared_by_a_tare():
 def test_a_tare_with_the_same_cells_reuses_the_inversion():
     """A new reference of the same cells is ready at once, with the same outputs."""
     sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
-    live = TouchStage(sensor, SHAPE, PITCH, params=TouchParams(reference_frames=1),
-                      background=True)
+    live = TouchStage(sensor, SHAPE, PITCH, params=LIVE, background=True)
     rng = np.random.default_rng(7)
     live.update(_points(_displacement(sensor.elastomer, [], 2e-6, rng)))
     live._preparing.done.wait(60)

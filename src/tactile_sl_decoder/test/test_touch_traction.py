@@ -1,6 +1,6 @@
 """The inversion recovers known loads from displacements of an independent forward model.
 
-Displacements come from :func:`tactile_sl_camera.elasticity.surface_displacement` of
+Displacements come from :func:`tactile_sl_common.elasticity.surface_displacement` of
 continuous Hertz tractions on a 10x finer grid (not from the cell kernel the inversion
 uses), sampled at the cell centres, with noise: 3 um on the half-space; 0.5 um on the
 2 mm layer, which is so stiff in the normal direction (nearly incompressible, thin) that
@@ -9,7 +9,7 @@ uses), sampled at the cell centres, with noise: 3 um on the half-space; 0.5 um o
 import numpy as np
 import pytest
 
-from tactile_sl_camera.elasticity import Elastomer, surface_displacement
+from tactile_sl_common.elasticity import Elastomer, surface_displacement
 from tactile_sl_decoder.touch.traction import TractionParams, TractionSolver
 
 PITCH = 5e-4

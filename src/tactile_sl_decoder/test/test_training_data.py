@@ -7,7 +7,7 @@ from tactile_sl_decoder.tooling import training
 
 
 def test_sensor_nuisances_are_valid_and_cover_every_kind():
-    from tactile_sl_camera.sim import Nuisances
+    from tactile_sl_sim.render import Nuisances
 
     rng = np.random.default_rng(3)
     seen: set[str] = set()
@@ -37,7 +37,8 @@ def test_random_scenes_vary_the_glyph_spacing():
 def test_frames_render_at_the_drawn_spacing_without_damaged_glyphs(monkeypatch):
     """A 12 px frame with 40 % of the glyphs partly worn: the glyphs are extracted at that
     spacing, and only the undamaged ones give patches (with their pattern symbols)."""
-    from tactile_sl_camera.sim import Nuisances, Renderer, load_artwork
+    from tactile_sl_sim.artwork import load_artwork
+    from tactile_sl_sim.render import Nuisances, Renderer
 
     nz = Nuisances.from_dict({"wear": 0.4})
     monkeypatch.setattr(training, "random_scene", lambda rng, kinds: ([], nz, 12.0))

@@ -4,7 +4,7 @@ import copy
 import numpy as np
 import pytest
 
-from tactile_sl_camera.images import to_gray
+from tactile_sl_common.images import to_gray
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.frames import bag_frames
 from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline

@@ -44,3 +44,22 @@ def test_ties_are_no_winner_and_the_lowest_cell_is_named():
     assert list(g) == [0, 2] and list(c) == [5, 4]
     assert list(top) == [0, 2] and list(total) == [4, 3]
     assert all(len(a) == 0 for a in group_votes(np.zeros(0, np.int64), np.zeros(0, np.int64)))
+
+
+@pytest.mark.parametrize("seed,p", [(0, 0.1), (1, 0.5), (2, 0.9)])
+def test_linked_regions_equal_scipys_connected_components(seed, p):
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from tactile_sl_decoder.decode.votes import linked_regions
+
+    rng = np.random.default_rng(seed)
+    n = 900
+    nbr = rng.integers(-1, n, (n, 8)).astype(np.int64)
+    ok = (rng.random((n, 8)) < p) & (nbr >= 0)
+    indices = np.where(ok, nbr, np.arange(n)[:, None]).astype(np.int32)
+    graph = csr_matrix((np.ones(8 * n), indices.reshape(-1),
+                        np.arange(0, 8 * n + 1, 8, dtype=np.int32)), shape=(n, n))
+    _, want = connected_components(graph, directed=False)
+    got = linked_regions(nbr, ok)
+    assert got.dtype == want.dtype and np.array_equal(got, want)

@@ -16,8 +16,18 @@ from typing import Any, Callable, Iterator
 
 from mcap.reader import make_reader
 
-from tactile_sl_camera.bag_io import BagError, BagReader, header_stamp_of_cdr
-from tactile_sl_decoder.frames import bag_topics
+from tactile_sl_common.bag_io import BagError, BagReader, header_stamp_of_cdr
+from tactile_sl_common.clouds import cloud_fields
+from tactile_sl_common.images import ImageFormatError, to_gray
+from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
+from tactile_sl_decoder.frames import bag_frames, bag_topics
+from tactile_sl_decoder.glyphs import PipelineInputError
+from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline
+from tactile_sl_decoder.sensor_step import SensorStep
+from tactile_sl_decoder.symbol_array import to_fields
+from tactile_sl_decoder.touch.messages import header, touch_messages
+from tactile_sl_decoder.touch.sensor import load_sensor
+from tactile_sl_decoder.touch.stage import TouchParams
 
 from .assembly import FrameAssembler
 from .view_model import as_message
@@ -126,18 +136,6 @@ def decode_bag(path: Path, namespace: str, options: dict[str, Any], total: int,
     ``mirrored``, ``reference_frames``.  A frame the pipeline refuses is left without
     outputs (its image is still shown).
     """
-    from tactile_sl_camera.clouds import cloud_fields
-    from tactile_sl_camera.images import ImageFormatError, to_gray
-    from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
-    from tactile_sl_decoder.frames import bag_frames
-    from tactile_sl_decoder.glyphs import PipelineInputError
-    from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline
-    from tactile_sl_decoder.symbol_array import to_fields
-    from tactile_sl_decoder.touch.messages import header, touch_messages
-    from tactile_sl_decoder.touch.reference import ReferenceError
-    from tactile_sl_decoder.touch.sensor import load_sensor
-    from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
-
     mirrored = bool(options.get("mirrored", False))
     pattern = load_pattern_spec(options.get("pattern"))
     params = PipelineParams(classifier_weights=options.get("classifier"))
@@ -146,32 +144,28 @@ def decode_bag(path: Path, namespace: str, options: dict[str, Any], total: int,
     try:
         check_classifier(pipeline.load_classifier(), pattern.symbols,
                          options.get("classifier") or "(shipped)")
-        touch = TouchStage(load_sensor(options.get("sensor")), pattern.array.shape,
-                           pattern.pitch_m, mirrored,
-                           TouchParams(reference_frames=int(options.get("reference_frames", 1))))
+        sensor = load_sensor(options.get("sensor"))
+        step = SensorStep(pipeline, sensor,
+                          TouchParams(reference_frames=int(options.get("reference_frames", 1))))
         for i, frame in enumerate(bag_frames(path, namespace, ground_truth=False)):
             if progress is not None:
                 progress(i + 1, total)
             try:
                 if frame.left_info is None or frame.right_info is None:
                     raise PipelineInputError("no camera_info for this frame")
-                result = pipeline.process(to_gray(frame.left_image), to_gray(frame.right_image),
-                                          frame.left_info, frame.right_info)
+                out = step.process(to_gray(frame.left_image), to_gray(frame.right_image),
+                                   frame.left_info, frame.right_info)
             except (PipelineInputError, ImageFormatError):
                 continue
+            result = out.stereo
             frame_id = result.frame_id or str(frame.left_image.header.frame_id)
             parts: dict[str, Any] = {
                 "points": as_message(cloud_fields(result.points, frame.stamp, frame_id)),
                 "glyphs": as_message(to_fields(result.left, header(frame.stamp, frame_id),
                                                with_patches=False))}
-            try:
-                outputs = touch.update(result.points)
-            except ReferenceError:
-                touch.tare()
-                outputs = None
-            if outputs is not None:
-                for name, _schema, fields in touch_messages(outputs, frame.stamp,
-                                                            touch.sensor.pad_frame):
+            if out.touch.result is not None:   # offline: no backlog, every frame in line
+                for name, _schema, fields in touch_messages(out.touch.result, frame.stamp,
+                                                            sensor.pad_frame):
                     parts[name] = as_message(fields)
             yield frame.stamp_ns, parts
     finally:

@@ -17,6 +17,7 @@ import threading
 from collections import OrderedDict
 from typing import Any, Callable
 
+import cv2
 import numpy as np
 
 from .assembly import FrameParts
@@ -87,8 +88,6 @@ def unpack(message: bytes) -> tuple[dict[str, Any], dict[str, Any]]:
 
 def encode_jpeg(gray: np.ndarray, quality: int) -> bytes:
     """JPEG of a grey image (OpenCV)."""
-    import cv2
-
     ok, data = cv2.imencode(".jpg", gray, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     if not ok:
         raise ValueError("JPEG encoding failed")

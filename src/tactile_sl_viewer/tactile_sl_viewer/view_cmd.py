@@ -12,11 +12,21 @@ import sys
 import threading
 from typing import Any
 
+from tactile_sl_common.bag_io import BagError
+from tactile_sl_decoder.checks import load_pattern_spec
+from tactile_sl_decoder.decode.codewords import PatternError
+from tactile_sl_decoder.tooling.progress import progress_bar
+from tactile_sl_decoder.touch.sensor import SensorFileError
+from tactile_sl_viewer.bag_source import BagSource
+from tactile_sl_viewer.packets import PacketBuilder
+from tactile_sl_viewer.view_model import PadGeometry
+from tactile_sl_viewer.web import ViewerServer
 
-def register(subparsers: Any) -> None:
+
+def register(subparsers: Any, summary: str | None = None) -> None:
     """Add the ``view`` subcommand."""
     p = subparsers.add_parser(
-        "view", help="show a recorded bag in the browser, frame by frame (read-only page)",
+        "view", help=summary,
         description="Serve the viewer's page for a recorded bag: the left image with the "
                     "decoded glyphs, the pressure or depth map, force, moment, contact and "
                     "slip of each frame, with a frame slider. A bag without the decoder's "
@@ -43,21 +53,12 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until Ctrl-C or SIGTERM (status 0); 1 on a bad bag, file or address."""
-    from tactile_sl_camera.bag_io import BagError
-    from tactile_sl_decoder.decode.codewords import PatternError
-    from tactile_sl_decoder.tooling.progress import progress_bar
-    from tactile_sl_decoder.touch.sensor import SensorFileError
-    from tactile_sl_viewer.bag_source import BagSource
-    from tactile_sl_viewer.packets import PacketBuilder
-    from tactile_sl_viewer.view_model import PadGeometry
-    from tactile_sl_viewer.web import ViewerServer
 
     def progress(done: int, total: int) -> None:
         if not args.no_progress:
             progress_bar(sys.stderr, done, total, "decode")
 
     try:
-        from tactile_sl_decoder.checks import load_pattern_spec
 
         pattern = load_pattern_spec(args.pattern)
         source = BagSource(args.bag, args.namespace, args.decode,

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from tactile_sl_camera.clouds import FIELD_FORCE_DTYPE, cloud_to_arrays
-from tactile_sl_camera.images import to_gray
+from tactile_sl_common.clouds import FIELD_FORCE_DTYPE, cloud_to_arrays
+from tactile_sl_common.images import to_gray
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.symbol_array import from_message
 

@@ -2,7 +2,7 @@
 a bag with recorded outputs is shown as recorded; frames are shown by index, any order."""
 import pytest
 
-from tactile_sl_camera.bag_io import BagReader, BagWriter
+from tactile_sl_common.bag_io import BagReader, BagWriter
 from tactile_sl_viewer.bag_source import BagSource
 
 from ros_harness import BAGS

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import viewer_messages as msgs
 
-from tactile_sl_camera.clouds import CloudFormatError
+from tactile_sl_common.clouds import CloudFormatError
 from tactile_sl_viewer.view_model import (
     PadGeometry,
     contact_cells,

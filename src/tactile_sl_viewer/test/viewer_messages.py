@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tactile_sl_camera.clouds import cloud_fields, pack_field, pack_points
-from tactile_sl_camera.images import image_fields
+from tactile_sl_common.clouds import cloud_fields, pack_field, pack_points
+from tactile_sl_common.images import image_fields
 from tactile_sl_viewer.view_model import PadGeometry, as_message
 
 PAD = PadGeometry(rows=6, cols=5, pitch=0.0005)

@@ -16,16 +16,12 @@ import rclpy
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
 
-from tactile_sl_camera.bag_io import BagError, stamp_to_ns
-from tactile_sl_camera.nodes import stop
-from tactile_sl_camera.nodes.parameters import (
-    FRAME_PREFIX_DOC,
-    LiveParameters,
-    declare_qos,
-    frame_prefix_check,
-)
-from tactile_sl_camera.nodes.runner import run_node
 from tactile_sl_camera.replay import HEADER_FIRST_TYPES, ReplayPlan, Restamper
+from tactile_sl_common.bag_io import BagError, stamp_to_ns
+from tactile_sl_common.nodes import stop
+from tactile_sl_common.nodes.parameters import LiveParameters, declare_qos
+from tactile_sl_common.nodes.runner import run_node
+from tactile_sl_common.settings import FRAME_PREFIX_DOC, frame_prefix_check
 
 
 def message_class(schema_name: str) -> Any:

@@ -17,18 +17,18 @@ import rclpy
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
-from tactile_sl_camera.nodes.runner import run_node
-
-from ..camera_info import (
+from tactile_sl_camera.stereo_capture import CaptureConfig, StereoCapture
+from tactile_sl_common.camera_info import (
     CameraCalibration,
     CameraInfoError,
     camera_info_fields,
     load_camera_info_yaml,
 )
-from ..images import image_fields
-from ..stereo_capture import CaptureConfig, StereoCapture
-from .camera_common import camera_info_msg, image_msg
-from .parameters import FRAME_PREFIX_DOC, LiveParameters, declare_qos, frame_prefix_check
+from tactile_sl_common.images import image_fields
+from tactile_sl_common.nodes.messages import camera_info_msg, image_msg
+from tactile_sl_common.nodes.parameters import LiveParameters, declare_qos
+from tactile_sl_common.nodes.runner import run_node
+from tactile_sl_common.settings import FRAME_PREFIX_DOC, frame_prefix_check
 
 
 class StereoCameraNode(Node):

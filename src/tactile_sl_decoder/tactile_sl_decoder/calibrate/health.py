@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from tactile_sl_camera.calibration import CalibrationError, StereoCalibrationResult
-from tactile_sl_camera.camera_info import CameraCalibration
+from tactile_sl_common.camera_info import CameraCalibration
+from tactile_sl_decoder.calibrate.result import CalibrationError, StereoCalibrationResult
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.stereo.stereo import StereoRig
 

@@ -1,6 +1,6 @@
 """Simulated calibration views: the flat printed artwork (or a checkerboard) at chosen poses.
 
-The simulator's renderer (:meth:`tactile_sl_camera.sim.render.Renderer.render_plane`) draws
+The simulator's renderer (:meth:`tactile_sl_sim.render.Renderer.render_plane`) draws
 a rigid plane seen by its stereo rig, whose calibration is exact (``rig.left_info``,
 ``rig.right_info``).  Poses are in the simulator's **pad frame** (origin at the rest pad's
 centre, cameras at z = -rig distance, z pointing away from the cameras): the artwork point
@@ -18,11 +18,14 @@ import cv2
 import numpy as np
 import yaml
 
-from tactile_sl_camera.calibration import board_points
-from tactile_sl_camera.camera_info import camera_info_fields, save_camera_info_yaml
-from tactile_sl_camera.sim.artwork import Artwork, checkerboard_albedo, load_artwork
-from tactile_sl_camera.sim.optics import rotation_xyz
-from tactile_sl_camera.sim.render import Renderer
+from tactile_sl_common.bag_io import BagWriter
+from tactile_sl_common.camera_info import camera_info_fields, save_camera_info_yaml
+from tactile_sl_common.images import image_fields
+from tactile_sl_decoder.calibrate.checkerboard import board_points
+from tactile_sl_decoder.pattern.artwork import render_array
+from tactile_sl_sim.artwork import Artwork, checkerboard_albedo, load_artwork
+from tactile_sl_sim.optics import rotation_xyz
+from tactile_sl_sim.render import Renderer
 
 PAPER_MARGIN_M = 0.002     # paper beyond the outer glyph centres
 BACKGROUND = 0.30          # albedo of what lies beyond the paper
@@ -51,7 +54,6 @@ def artwork_of(pattern: Any = None) -> Artwork:
     """
     if pattern is None:
         return load_artwork()
-    from tactile_sl_decoder.pattern.artwork import render_array
 
     image, facts = render_array(pattern, 40.0)
     return Artwork(image.astype(np.float32) / 255.0, tuple(facts["cell00_px"]),
@@ -165,12 +167,38 @@ def render_board_views(renderer: Renderer, artwork: Artwork, poses: list[PlanePo
     return out
 
 
-def board_corners_left(renderer: Renderer, artwork: Artwork, pose: PlanePose,
-                       pattern: tuple[int, int], square: float) -> np.ndarray:
-    """True inner corners of the matching checkerboard in the left optical frame (m)."""
-    t = _board_translation(artwork, pose, pattern, square)
+def simulated_board_views(renderer: Renderer, pattern: tuple[int, int], square: float,
+                          views: int = 15, seed: int = 0
+                          ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Checkerboard image pairs rendered by the simulator at varied, fully visible poses."""
+    rng = np.random.default_rng(seed)
+    cols, rows = pattern
+    centre = np.array([(cols - 1) * square / 2, (rows - 1) * square / 2, 0.0])
     obj = board_points(pattern, square).astype(np.float64)
-    return renderer.rig.world_to_left(obj @ pose.R.T + t)
+    out: list[tuple[np.ndarray, np.ndarray]] = []
+    tries = 0
+    while len(out) < views and tries < views * 20:
+        tries += 1
+        R = rotation_xyz(np.radians(rng.uniform(-28, 28)), np.radians(rng.uniform(-28, 28)),
+                         np.radians(rng.uniform(-15, 15)))
+        position = np.array([rng.uniform(-0.0015, 0.0015), rng.uniform(-0.0012, 0.0012),
+                             rng.uniform(-0.003, 0.002)])
+        t = position - R @ centre
+        corners = obj @ R.T + t
+        ok = True
+        for cam in renderer.rig.cameras:
+            px = cam.project(corners)
+            m = 2.0 * square * cam.K[0, 0] / renderer.rig.params.distance
+            if not ((px[:, 0] > m).all() and (px[:, 0] < cam.width - m).all()
+                    and (px[:, 1] > m).all() and (px[:, 1] < cam.height - m).all()):
+                ok = False
+        if not ok:
+            continue
+        def albedo(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+            return checkerboard_albedo(u, v, square, cols + 1, rows + 1)
+        images = [renderer.render_plane(i, R, t, albedo, rng=rng) for i in range(2)]
+        out.append((images[0], images[1]))
+    return out
 
 
 def true_cells_left(renderer: Renderer, pose: PlanePose, row: np.ndarray, col: np.ndarray,
@@ -206,9 +234,6 @@ def write_untouched_bag(path: str | pathlib.Path, renderer: Renderer, frames: in
 
     Default CameraInfo: the true calibration.  For ``calibrate --check`` tests and demos.
     """
-    from tactile_sl_camera.bag_io import BagWriter
-    from tactile_sl_camera.images import image_fields
-
     left_info = left_info or renderer.rig.left_info
     right_info = right_info or renderer.rig.right_info
     p = pathlib.Path(path)

@@ -30,9 +30,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from tactile_sl_camera.calibration import CalibrationError, StereoCalibrationResult
-from tactile_sl_camera.camera_info import CameraCalibration, camera_info_yaml_text
-from tactile_sl_camera.safe_files import write_files
+from tactile_sl_common.camera_info import CameraCalibration, camera_info_yaml_text
+from tactile_sl_common.safe_files import write_files
+from tactile_sl_decoder.calibrate.result import CalibrationError, StereoCalibrationResult
 
 from .views import CameraView, PatternTarget, StereoView
 

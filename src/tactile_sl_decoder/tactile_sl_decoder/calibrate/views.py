@@ -10,8 +10,9 @@ convention).  Extraction, classification and codeword decoding are the decoder's
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Iterable, Iterator
+from typing import Any
 
+import cv2
 import numpy as np
 
 from tactile_sl_decoder.glyphs import Glyphs
@@ -116,21 +117,11 @@ class ViewDecoder:
         self.pipeline.decode_pair(gl, gr)
         return gl, gr
 
-    def decode_all(self, pairs: Iterable[tuple[np.ndarray, np.ndarray]],
-                   names: Iterable[str] | None = None) -> Iterator[StereoView]:
-        """Decode many pairs (lazily: images are not all held in memory)."""
-        names_it = iter(names) if names is not None else None
-        for i, (left, right) in enumerate(pairs):
-            name = next(names_it) if names_it is not None else f"{i:03d}"
-            yield self.decode(_gray(left), _gray(right), name)
-
     def close(self) -> None:
         self.pipeline.close()
 
 
 def _gray(image: np.ndarray) -> np.ndarray:
     if image.ndim == 3:
-        import cv2
-
         return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
     return image

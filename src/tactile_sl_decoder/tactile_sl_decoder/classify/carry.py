@@ -30,10 +30,13 @@ camera; the state is one frame of one camera (:class:`LabelCarry`).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
+from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.neighbours import nearest_within
 
 CROP = 3   # pixels left out on each side of a patch for the correlation (the glyph's ring)
@@ -44,25 +47,31 @@ class CarryParams:
     """When a glyph keeps the label of the glyph at its place in the previous frame."""
 
     enabled: bool = True
-    radius: float = 0.3           # x glyph spacing, around the predicted position
-    min_correlation: float = 0.93  # patch correlation with the previous glyph's patch
-    min_confidence: float = 0.9   # the previous label's confidence
-    refresh_frames: int = 8       # classified again after at most this many carried frames
-    cells: bool = True            # cells too, when this frame's lattice confirms all of them
+    """A glyph where a glyph was one frame earlier, looking the same, keeps its label instead
+    of being classified again (off: every glyph is classified every frame)."""
+    radius: float = 0.3
+    """Largest distance from the previous glyph's predicted position, in glyph spacings."""
+    min_correlation: float = 0.93
+    """Smallest correlation of the two glyph patches."""
+    min_confidence: float = 0.9
+    """Smallest confidence of the label carried."""
+    refresh_frames: int = 8
+    """Every glyph is classified again after at most this many frames, and every frame
+    decoded in full after at most this many."""
+    cells: bool = True
+    """Cells too: when this frame's lattice and labels confirm the cell of every glyph
+    matched to the previous frame, the window search is skipped."""
 
     def validate(self) -> "CarryParams":
-        """Raise ValueError for settings outside their ranges."""
-        if not 0.0 < self.radius <= 0.5:
-            raise ValueError(f"carry radius must be in (0, 0.5] spacings, got {self.radius}")
-        if not -1.0 <= self.min_correlation <= 1.0:
-            raise ValueError(f"carry min_correlation must be in [-1, 1], got "
-                             f"{self.min_correlation}")
-        if not 0.0 <= self.min_confidence <= 1.0:
-            raise ValueError(f"carry min_confidence must be in [0, 1], got "
-                             f"{self.min_confidence}")
-        if self.refresh_frames < 1:
-            raise ValueError(f"carry refresh_frames must be >= 1, got {self.refresh_frames}")
+        """Raise ValueError naming the first setting outside :data:`CARRY_SETTINGS`."""
+        CARRY_SETTINGS.check(self, "carry.")
         return self
+
+
+CARRY_SETTINGS = SettingsTable(CarryParams, ranges={
+    "radius": (0.05, 0.5), "min_correlation": (0.5, 1.0), "min_confidence": (0.0, 1.0),
+    "refresh_frames": (1, 1000)})
+"""The decoder node's live ``carry.<field>`` parameters."""
 
 
 def normalised_patches(patches: np.ndarray) -> np.ndarray:
@@ -179,3 +188,42 @@ class LabelCarry:
                             np.asarray(label, np.uint8).copy(),
                             np.asarray(confidence, np.float32).copy(), carried_for,
                             frame.patches, frame.spacing_px)
+
+
+def label_glyphs(images: Sequence[Glyphs], carries: Sequence[LabelCarry | None],
+                 predict: Callable[[np.ndarray], tuple[np.ndarray, Any]]) -> int:
+    """Label the glyphs of one or more images (in place), one classifier batch.
+
+    With a :class:`LabelCarry` per image, glyphs that keep the previous frame's label are
+    not classified; ``predict`` (patches -> labels, confidences) sees the others only, and
+    is not called when there are none.  Returns the number of glyphs labelled from the
+    previous frame.
+    """
+    work = [(g, c) for g, c in zip(images, carries) if len(g) and g.patches is not None]
+    for g, c in zip(images, carries):
+        if c is not None and not (len(g) and g.patches is not None):
+            c.reset()
+    if not work:
+        return 0
+    patches = [np.asarray(g.patches) for g, _ in work]
+    frames = [c.carry(g.u, g.v, p, g.spacing_px) if c is not None else None
+              for (g, c), p in zip(work, patches)]
+    todo = [np.flatnonzero(~f.carried) if f is not None else slice(None) for f in frames]
+    batch = [p[t] for p, t in zip(patches, todo)]
+    sizes = [len(b) for b in batch]
+    label, conf = (predict(np.concatenate(batch)) if sum(sizes)
+                   else (np.zeros(0, np.uint8), np.zeros(0, np.float32)))
+    start = carried = 0
+    for (g, c), f, t, k in zip(work, frames, todo, sizes):
+        if f is None:
+            g.label = np.asarray(label[start:start + k], np.uint8)
+            g.confidence = np.asarray(conf[start:start + k], np.float32)
+        else:
+            g.label, g.confidence = f.label.copy(), f.confidence.copy()
+            g.label[t] = label[start:start + k]
+            g.confidence[t] = conf[start:start + k]
+            assert c is not None     # f is None exactly where c is
+            c.remember(f, g.label, g.confidence)
+            carried += int(f.carried.sum())
+        start += k
+    return carried

@@ -385,7 +385,7 @@ def _torch_load(path: Path, reason: WeightsFileError) -> Any:
     tensors they advise loading it again with the restriction off, which runs whatever code
     the file carries, advice a user must not follow for a file of unknown origin.
     """
-    try:
+    try:  # torch (1-2 s to import) only for this: the nodes classify without it
         import torch
     except ImportError:
         raise ClassifierError(f"{path}: not a loadable weights file ({reason})") from None

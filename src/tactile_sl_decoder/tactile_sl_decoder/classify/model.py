@@ -12,6 +12,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from tactile_sl_decoder.classify.classifier import LENET_ARCH, TINY_ARCH
 from tactile_sl_decoder.contract import PATCH_SIZE
 
 
@@ -69,8 +70,6 @@ class GlyphNetTiny(nn.Module):
 
 def make_model(arch: str, classes: int) -> nn.Module:
     """A fresh net of the architecture tagged ``arch`` (classify.classifier's tags)."""
-    from tactile_sl_decoder.classify.classifier import LENET_ARCH, TINY_ARCH
-
     if arch == LENET_ARCH:
         return GlyphNet(classes)
     if arch == TINY_ARCH:

@@ -1,47 +1,69 @@
 """The `tactile-sl` command-line tool: one entry point, one module per subcommand.
 
-Each subcommand module exposes ``register(subparsers)``, which adds its parser and sets
-``func`` (called with the parsed arguments, returning the exit status). Modules are listed
-here rather than discovered so that ``tactile-sl --help`` is fast and its order is stable.
+Each subcommand module exposes ``register(subparsers, summary)``, which adds its parser
+(with ``summary``, its line in the list of commands) and sets ``func`` (called with the
+parsed arguments, returning the exit status).  Only the module of
+the command being run is imported: ``tactile-sl --help`` lists the commands from
+:data:`COMMANDS` without loading numpy, OpenCV, the numba kernels or torch, so the command
+modules import their libraries at the top like any other module.  Commands are listed here
+rather than discovered so that their order is stable.
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
 import importlib
+import importlib.util
 import signal
 import sys
 import threading
 from typing import Iterator, Sequence
 
-# Subcommand modules in help order; one whose package is not installed is omitted.
-SUBCOMMAND_MODULES: tuple[str, ...] = (
-    "tactile_sl_decoder.cli.pattern_cmd",
-    "tactile_sl_camera.cli.synth_cmd",
-    "tactile_sl_decoder.cli.calibrate_cmd",
-    "tactile_sl_decoder.cli.train_cmd",
-    "tactile_sl_decoder.cli.evaluate_cmd",
-    "tactile_sl_decoder.cli.replay_cmd",
-    "tactile_sl_viewer.view_cmd",        # the viewer package's (omitted when not installed)
-)
+COMMANDS: dict[str, tuple[str, str]] = {
+    # name: (module, one line for `tactile-sl --help`), in help order
+    "pattern": ("tactile_sl_decoder.cli.pattern_cmd",
+                "M-array pattern: generate, verify, render, bound, benchmark"),
+    "synth": ("tactile_sl_sim.cli.synth_cmd",
+              "render simulated stereo bags (images, camera_info, ground truth)"),
+    "calibrate": ("tactile_sl_decoder.cli.calibrate_cmd",
+                  "stereo calibration (printed pattern or checkerboard) -> left/right "
+                  "camera_info YAML; --check judges one in place"),
+    "train": ("tactile_sl_decoder.cli.train_cmd",
+              "train the glyph classifier on simulated images (CPU, minutes)"),
+    "evaluate": ("tactile_sl_decoder.cli.evaluate_cmd",
+                 "per scene and frame: extraction recall/spurious rate, classification "
+                 "accuracy and confusion matrix, end-to-end and touch figures against a bag's "
+                 "ground truth"),
+    "replay": ("tactile_sl_decoder.cli.replay_cmd",
+               "decode a bag offline into /tactile/points (same pipeline as the node)"),
+}
+"""Every subcommand; one whose package is not installed is left out."""
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Assemble the parser from every subcommand module that is present."""
+def _installed(module: str) -> bool:
+    return importlib.util.find_spec(module.split(".")[0]) is not None
+
+
+def command_of(argv: Sequence[str]) -> str | None:
+    """The subcommand ``argv`` runs (its first word that names one), or None."""
+    return next((word for word in argv if word in COMMANDS), None)
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser: every installed command listed, ``command`` with all its arguments."""
     parser = argparse.ArgumentParser(
         prog="tactile-sl",
         description="tactile-sl: structured-light tactile sensor tools "
         "(patterns, simulation, calibration, training, offline replay and evaluation).",
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in SUBCOMMAND_MODULES:
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name is not None and name.startswith(exc.name):
-                continue  # subcommand not built yet / package not installed
-            raise
-        module.register(subparsers)
+    for name, (module, text) in COMMANDS.items():
+        if not _installed(module):
+            continue                         # subcommand not built yet / package not installed
+        if name == command:
+            importlib.import_module(module).register(subparsers, text)
+        else:
+            subparsers.add_parser(name, help=text)
     return parser
 
 
@@ -72,13 +94,15 @@ def _sigterm_as_exception() -> Iterator[None]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one subcommand; its exit status (130 after Ctrl-C, 143 after SIGTERM)."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 0 if args.command is None else 2
+    words = sys.argv[1:] if argv is None else list(argv)
+    command = command_of(words)
     try:
-        with _sigterm_as_exception():
+        with _sigterm_as_exception():   # from the start: the command's imports take a while
+            parser = build_parser(command)
+            args = parser.parse_args(words)
+            if not getattr(args, "func", None):
+                parser.print_help()
+                return 0 if args.command is None else 2
             return int(args.func(args) or 0)
     except Terminated:
         print("terminated", file=sys.stderr)
@@ -92,7 +116,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         text = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
         filename = getattr(exc, "filename", None)   # MemoryError has none
         where = f" {filename}:" if filename else ""
-        print(f"tactile-sl {args.command}:{where} {text}", file=sys.stderr)
+        print(f"tactile-sl {command}:{where} {text}", file=sys.stderr)
         return 1
 
 

@@ -4,7 +4,8 @@ Modes, one per source option (mutually exclusive), dispatched by :func:`run`:
 
 - ``--folder DIR`` / ``--bag BAG``: calibrate from image pairs; with ``--target PATTERN.yaml``
   from views of the printed pattern (:mod:`tactile_sl_decoder.calibrate`), else from a
-  checkerboard (``--pattern COLSxROWS --square M``, :mod:`tactile_sl_camera.calibration`);
+  checkerboard (``--pattern COLSxROWS --square M``,
+  :mod:`tactile_sl_decoder.calibrate.checkerboard`);
 - ``--simulate N``: write N simulated view pairs and the true calibration (pattern views with
   ``--target``, else checkerboards);
 - ``--check BAG``: judge a calibration from untouched frames of the assembled sensor;
@@ -20,7 +21,49 @@ import pathlib
 import sys
 from typing import TYPE_CHECKING, Any, Callable
 
+import cv2
+import numpy as np
+
+from tactile_sl_common.bag_io import BagError
+from tactile_sl_common.camera_info import (
+    CameraInfoError,
+    calibration_from_msg,
+    camera_info_yaml_text,
+    load_camera_info_yaml,
+)
+from tactile_sl_common.images import to_gray
+from tactile_sl_common.safe_files import check_outputs, write_files
+from tactile_sl_decoder.calibrate import (
+    CalibrationOptions,
+    PatternTarget,
+    ViewDecoder,
+    calibrate_pattern_stereo,
+)
+from tactile_sl_decoder.calibrate.checkerboard import (
+    calibrate_stereo,
+    iter_bag_pairs,
+    iter_folder_pairs,
+    unpaired_images,
+)
+from tactile_sl_decoder.calibrate.health import calibration_health, refine_extrinsics
+from tactile_sl_decoder.calibrate.result import CalibrationError
+from tactile_sl_decoder.calibrate.simulate import (
+    artwork_of,
+    random_poses,
+    render_pattern_views,
+    simulated_board_views,
+    write_views,
+)
 from tactile_sl_decoder.cli.argtypes import number
+from tactile_sl_decoder.frames import bag_frames
+from tactile_sl_decoder.glyphs import PipelineInputError
+from tactile_sl_decoder.pattern import PatternFormatError, load_default_pattern, load_pattern
+from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+from tactile_sl_decoder.stereo.stereo import StereoRig
+from tactile_sl_decoder.touch.force_calibration import calibrate_forces, load_loads_file
+from tactile_sl_decoder.touch.sensor import load_sensor, sensor_yaml_text
+from tactile_sl_sim.artwork import Artwork
+from tactile_sl_sim.render import Renderer
 
 if TYPE_CHECKING:  # the modes import numpy themselves, so that --help stays fast
     import numpy as np
@@ -47,11 +90,10 @@ def _fraction(text: str) -> float:
     return value
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction, summary: str | None = None) -> None:
     """Add the ``calibrate`` subcommand."""
     p = subparsers.add_parser(
-        "calibrate", help="stereo calibration (printed pattern or checkerboard) -> "
-        "left/right camera_info YAML; --check judges one in place",
+        "calibrate", help=summary,
         description="Calibrate the stereo pair by Zhang's method (OpenCV) from views of the "
         "printed pattern (--target, partial views fine) or of a checkerboard, and write "
         "OUT/left.yaml and OUT/right.yaml in ROS camera_calibration format (K, D plumb_bob, "
@@ -139,10 +181,6 @@ def _mode(args: argparse.Namespace) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``tactile-sl calibrate``: one handler per mode."""
-    from tactile_sl_camera.bag_io import BagError
-    from tactile_sl_camera.calibration import CalibrationError
-    from tactile_sl_camera.camera_info import CameraInfoError
-
     handlers: dict[str, Callable[[argparse.Namespace], int]] = {
         "board": _run_board, "target": _run_target, "simulate": _run_simulate,
         "check": _run_check, "refine": _run_refine, "force": _run_force}
@@ -154,8 +192,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _pairs(args: argparse.Namespace) -> Any:
-    from tactile_sl_camera.calibration import iter_bag_pairs, iter_folder_pairs, unpaired_images
-
     if args.folder:
         alone = unpaired_images(args.folder)
         if alone:       # "pairs used 4/4" alone would hide them
@@ -166,9 +202,6 @@ def _pairs(args: argparse.Namespace) -> Any:
 
 
 def _target(args: argparse.Namespace) -> Any:
-    from tactile_sl_decoder.calibrate import PatternTarget
-    from tactile_sl_decoder.pattern import PatternFormatError
-
     try:
         return PatternTarget.load(args.target or None, mirrored=args.mirrored)
     except (PatternFormatError, OSError) as exc:
@@ -180,9 +213,6 @@ def _target(args: argparse.Namespace) -> Any:
 
 def _run_board(args: argparse.Namespace) -> int:
     """Checkerboard calibration (the original path)."""
-    from tactile_sl_camera.calibration import calibrate_stereo
-    from tactile_sl_camera.safe_files import check_outputs
-
     check_outputs(args.output, CAMERA_FILES)       # before any work
 
     def on_pair(i: int, ok: bool) -> None:
@@ -200,14 +230,6 @@ def _run_board(args: argparse.Namespace) -> int:
 
 def _run_target(args: argparse.Namespace) -> int:
     """Printed-pattern calibration: decode every view, calibrate, report, write."""
-    from tactile_sl_camera.calibration import CalibrationError
-    from tactile_sl_camera.safe_files import check_outputs
-    from tactile_sl_decoder.calibrate import (
-        CalibrationOptions,
-        ViewDecoder,
-        calibrate_pattern_stereo,
-    )
-
     check_outputs(args.output, CAMERA_FILES + ([] if args.no_coverage else ["coverage.png"]))
     target = _target(args)
     decoder = ViewDecoder(target)
@@ -238,15 +260,11 @@ def _run_target(args: argparse.Namespace) -> int:
 
 
 def _gray(image: Any) -> Any:
-    import cv2
-
     return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if image.ndim == 3 else image
 
 
 def _mirror_hint(target: Any, views: list[Any], first: Any, opts: Any) -> str:
     """Advice when the first pair decodes far better with the other ``mirrored`` setting."""
-    from tactile_sl_decoder.calibrate import PatternTarget, ViewDecoder
-
     if first is None or not views:
         return ""
     now = max(len(views[0].left), len(views[0].right))
@@ -266,23 +284,10 @@ def _mirror_hint(target: Any, views: list[Any], first: Any, opts: Any) -> str:
 
 def _run_simulate(args: argparse.Namespace) -> int:
     """Simulated views (pattern with --target, else checkerboards) and the truth."""
-    import numpy as np
-
-    from tactile_sl_camera.sim.render import Renderer
-    from tactile_sl_decoder.calibrate.simulate import (
-        artwork_of,
-        random_poses,
-        render_pattern_views,
-        write_views,
-    )
-
     out = pathlib.Path(args.output)
     if args.simulate < 1:
         raise ValueError("--simulate needs at least 1 view")
     if args.target is None:
-        from tactile_sl_camera.calibration import simulated_board_views
-        from tactile_sl_camera.sim.artwork import Artwork
-
         # the pad artwork is irrelevant for boards: a blank one keeps this independent of it
         blank = Artwork(np.ones((8, 8), np.float32), (3.5, 3.5), 4.0, 0.0005, 1, 1)
         renderer = Renderer(blank)
@@ -292,7 +297,6 @@ def _run_simulate(args: argparse.Namespace) -> int:
         print(f"wrote {len(views)} simulated checkerboard pairs and the true calibration "
               f"to {out}")
         return 0
-    from tactile_sl_decoder.pattern import load_default_pattern, load_pattern
 
     pattern = load_pattern(args.target) if args.target else load_default_pattern()
     artwork = artwork_of(pattern if args.target else None)
@@ -308,11 +312,6 @@ def _run_simulate(args: argparse.Namespace) -> int:
 
 def _untouched(args: argparse.Namespace, bag: str) -> tuple[list[Any], Any, Any]:
     """Decoded untouched frames of a bag, and the calibration to judge (left, right)."""
-    from tactile_sl_camera.camera_info import calibration_from_msg, load_camera_info_yaml
-    from tactile_sl_camera.images import to_gray
-    from tactile_sl_decoder.calibrate import ViewDecoder
-    from tactile_sl_decoder.frames import bag_frames
-
     if args.frames < 1:
         raise ValueError("--frames must be at least 1")
     folder = pathlib.Path(args.calibration) if args.calibration else None
@@ -346,9 +345,6 @@ def _untouched(args: argparse.Namespace, bag: str) -> tuple[list[Any], Any, Any]
 
 def _run_check(args: argparse.Namespace) -> int:
     """Health check in place: figures and a verdict (exit status 0 pass, 1 fail)."""
-    from tactile_sl_decoder.calibrate.health import calibration_health
-    from tactile_sl_decoder.stereo.stereo import StereoRig
-
     views, left, right = _untouched(args, args.check)
     report = calibration_health([v.left for v in views], [v.right for v in views],
                                 StereoRig(left, right), _target(args))
@@ -359,11 +355,6 @@ def _run_check(args: argparse.Namespace) -> int:
 
 def _run_refine(args: argparse.Namespace) -> int:
     """Refine the extrinsics in place; write the refined calibration atomically."""
-    from tactile_sl_camera.camera_info import camera_info_yaml_text
-    from tactile_sl_camera.safe_files import check_outputs, write_files
-    from tactile_sl_decoder.calibrate.health import calibration_health, refine_extrinsics
-    from tactile_sl_decoder.stereo.stereo import StereoRig
-
     check_outputs(args.output, CAMERA_FILES)       # before any work
     views, left, right = _untouched(args, args.refine)
     target = _target(args)
@@ -384,14 +375,6 @@ def _run_refine(args: argparse.Namespace) -> int:
 
 def _run_force(args: argparse.Namespace) -> int:
     """Fit the elastomer to a recording with known loads; write OUT/sensor.yaml."""
-    from tactile_sl_camera.images import to_gray
-    from tactile_sl_camera.safe_files import check_outputs, write_files
-    from tactile_sl_decoder.frames import bag_frames
-    from tactile_sl_decoder.glyphs import PipelineInputError
-    from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
-    from tactile_sl_decoder.touch.force_calibration import calibrate_forces, load_loads_file
-    from tactile_sl_decoder.touch.sensor import load_sensor, sensor_yaml_text
-
     if not args.bag:
         raise ValueError("--loads needs the recording: --bag BAG")
     check_outputs(args.output, ["sensor.yaml"])      # before any work

@@ -6,22 +6,51 @@ symbol sections live here, later stages append theirs to ``SECTIONS``.
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import sys
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
+from tactile_sl_common.bag_io import BagError
+from tactile_sl_common.safe_files import OutputError, check_output, write_text
+from tactile_sl_decoder.classify.classifier import Classifier
 from tactile_sl_decoder.cli.argtypes import number
+from tactile_sl_decoder.pattern import load_default_pattern, load_pattern
+from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
+from tactile_sl_decoder.tooling.bag_runs import evaluate_bag, evaluate_touch_bag
+from tactile_sl_decoder.tooling.e2e_metrics import BagMetrics, FrameMetrics
+from tactile_sl_decoder.tooling.e2e_metrics import format_table as format_bag_table
+from tactile_sl_decoder.tooling.evaluation import (
+    aggregate,
+    classification_section,
+    confusion_section,
+    evaluate_symbols_bag,
+    extraction_section,
+    format_confusion,
+    format_table,
+    to_json,
+)
+from tactile_sl_decoder.tooling.slip_metrics import format_slip_report, slip_frames
+from tactile_sl_decoder.tooling.touch_metrics import (
+    LIMITS,
+    format_report,
+    has_touch_truth,
+    resolve_sensor,
+    sensor_text,
+)
+from tactile_sl_decoder.tooling.training import DEFAULT_PRIMITIVES, artwork_values
+from tactile_sl_decoder.touch.sensor import SensorFileError
+from tactile_sl_sim.artwork import load_artwork
 
 
-def register(subparsers: Any) -> None:
+def register(subparsers: Any, summary: str | None = None) -> None:
     """Add the ``evaluate`` subcommand."""
     p = subparsers.add_parser(
-        "evaluate", help="per scene and frame: extraction recall/spurious rate, "
-        "classification accuracy and confusion matrix, end-to-end and touch figures against "
-        "a bag's ground truth",
+        "evaluate", help=summary,
         description="Runs glyph extraction and classification on every frame of bags that "
         "carry /tactile/ground_truth/points and compares with the ground truth projected "
         "into both images (see docs/extraction.md for the definitions); then the end-to-end "
@@ -77,8 +106,6 @@ def _skips(args: argparse.Namespace, bag: Path) -> Callable[[int, str], None] | 
 
 def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
     """(values array, primitive names, where they came from) for labelling the truth."""
-    from tactile_sl_decoder.pattern import load_default_pattern, load_pattern
-
     try:
         pat = load_pattern(path) if path is not None else load_default_pattern()
         return pat.array, list(pat.primitives), str(path or "shipped pattern")
@@ -86,9 +113,6 @@ def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
         if path is not None:
             raise
         # the shipped pattern must match the shipped artwork; read the values from it
-        from tactile_sl_camera.sim import load_artwork
-        from tactile_sl_decoder.tooling.training import DEFAULT_PRIMITIVES, artwork_values
-
         print(f"evaluate: warning: shipped pattern unreadable ({exc}); reading cell values "
               "from the simulator artwork instead", file=sys.stderr)
         return (artwork_values(load_artwork(), DEFAULT_PRIMITIVES), list(DEFAULT_PRIMITIVES),
@@ -97,19 +121,6 @@ def pattern_values(path: Path | None) -> tuple[np.ndarray, list[str], str]:
 
 def symbol_sections(args: argparse.Namespace, bags: list[Path]) -> str:
     """Extraction, classification and confusion tables of every bag, plus JSON."""
-    from tactile_sl_camera.bag_io import BagError
-    from tactile_sl_decoder.classify.classifier import Classifier
-    from tactile_sl_decoder.tooling.evaluation import (
-        aggregate,
-        classification_section,
-        confusion_section,
-        evaluate_symbols_bag,
-        extraction_section,
-        format_confusion,
-        format_table,
-        to_json,
-    )
-
     try:
         values, names, source = pattern_values(args.pattern)
         clf = Classifier.load(args.weights)
@@ -153,8 +164,6 @@ def symbol_sections(args: argparse.Namespace, bags: list[Path]) -> str:
         for t in totals + [overall]:
             out.append(format_confusion(confusion_section(t, names)))
     if args.json:
-        from tactile_sl_camera.safe_files import write_text
-
         write_text(args.json, json.dumps({"images": to_json(all_rows),
                                           "scenes": to_json(totals)}, indent=1))
     return "\n".join(out)
@@ -174,17 +183,9 @@ def e2e_section(args: argparse.Namespace, bags: list[Path]) -> str:
     ``args.totals_only`` and ``args.json`` (figures also written to
     ``<json stem>.e2e.json``) when present.
     """
-    import io
-
-    from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
-    from tactile_sl_decoder.tooling.bag_runs import evaluate_bag
-    from tactile_sl_decoder.tooling.e2e_metrics import BagMetrics, FrameMetrics, format_table
-
     classifier = None
     weights = getattr(args, "weights", None)
     if weights:
-        from tactile_sl_decoder.classify.classifier import Classifier
-
         classifier = Classifier.load(weights)
     pattern = getattr(args, "pattern", None)
     pipe = StereoPipeline(PatternSpec.load(pattern), classifier)
@@ -213,11 +214,9 @@ def e2e_section(args: argparse.Namespace, bags: list[Path]) -> str:
                   f"{1e3 * s['median_m']:>7.4f} {1e3 * s['p95_m']:>7.4f} "
                   f"{f.timings_ms.get('total', float('nan')):>6.1f}", file=out)
         print(file=out)
-    format_table(per_bag, file=out)
+    format_bag_table(per_bag, file=out)
     json_path = getattr(args, "json", None)
     if json_path:
-        from tactile_sl_camera.safe_files import write_text
-
         target = Path(json_path).with_suffix(".e2e.json")
         write_text(target, json.dumps({
             "bags": [b.summary() for b in per_bag],
@@ -235,21 +234,6 @@ def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
     ``args.namespace``, ``args.max_frames``, ``args.totals_only`` and ``args.json`` (figures
     also written to ``<json stem>.touch.json``) when present.
     """
-    from dataclasses import asdict
-
-    from tactile_sl_camera.bag_io import BagError
-    from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
-    from tactile_sl_decoder.tooling.bag_runs import evaluate_touch_bag
-    from tactile_sl_decoder.tooling.slip_metrics import format_slip_report, slip_frames
-    from tactile_sl_decoder.tooling.touch_metrics import (
-        LIMITS,
-        format_report,
-        has_touch_truth,
-        resolve_sensor,
-        sensor_text,
-    )
-    from tactile_sl_decoder.touch.sensor import SensorFileError
-
     try:
         namespace = getattr(args, "namespace", "/tactile")
         touch_bags = [b for b in bags if has_touch_truth(b, namespace)]
@@ -261,8 +245,6 @@ def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
         classifier = None
         weights = getattr(args, "weights", None)
         if weights:
-            from tactile_sl_decoder.classify.classifier import Classifier
-
             classifier = Classifier.load(weights)
         pipe = StereoPipeline(PatternSpec.load(getattr(args, "pattern", None)), classifier)
         per_bag = []
@@ -286,8 +268,6 @@ def touch_section(args: argparse.Namespace, bags: list[Path]) -> str:
             text += f"\n(no touch ground truth, not in the touch figures: {', '.join(skipped)})"
         json_path = getattr(args, "json", None)
         if json_path:
-            from tactile_sl_camera.safe_files import write_text
-
             target = Path(json_path).with_suffix(".touch.json")
             write_text(target, json.dumps({
                 "limits": asdict(LIMITS),
@@ -313,7 +293,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"evaluate: no such bag: {', '.join(missing)}", file=sys.stderr)
         return 2
     if args.json:     # before any work: an output that cannot be written is said at once
-        from tactile_sl_camera.safe_files import OutputError, check_output
 
         try:
             check_output(args.json, args.bags)

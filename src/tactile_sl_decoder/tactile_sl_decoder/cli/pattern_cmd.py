@@ -9,10 +9,9 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from tactile_sl_camera.safe_files import OutputError, check_output, write_text
+from tactile_sl_common.safe_files import OutputError, check_output, write_text
 from tactile_sl_decoder.cli.argtypes import number
-
-from ..pattern import (
+from tactile_sl_decoder.pattern import (
     Constraints,
     Pattern,
     PatternFormatError,
@@ -21,7 +20,16 @@ from ..pattern import (
     save_pattern,
     verify_pattern,
 )
-from ..pattern.fileio import DEFAULT_PITCH_M
+from tactile_sl_decoder.pattern.artwork import render_png, render_svg
+from tactile_sl_decoder.pattern.benchmark import run_benchmark
+from tactile_sl_decoder.pattern.bounds import bound_report
+from tactile_sl_decoder.pattern.fileio import DEFAULT_PITCH_M
+from tactile_sl_decoder.pattern.generators import (
+    DESCRIPTIONS,
+    GENERATORS,
+    GenerationFailed,
+    generate,
+)
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -64,8 +72,6 @@ def _plain(value: Any) -> Any:
 
 def cmd_generate(args: argparse.Namespace) -> int:
     """Generate a pattern; non-zero exit (with the reason) when the budget ends first."""
-    from ..pattern.generators import GenerationFailed, generate
-
     try:
         constraints = _constraints(args)
     except ValueError as exc:
@@ -136,8 +142,6 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
 def cmd_render(args: argparse.Namespace) -> int:
     """Write SVG (mm) and/or PNG (+ sidecar) artwork of a pattern file."""
-    from ..pattern.artwork import render_png, render_svg
-
     if not args.svg and not args.png:
         print("error: give --svg OUT.svg and/or --png OUT.png", file=sys.stderr)
         return EXIT_USAGE
@@ -203,8 +207,6 @@ def _render_atomic(target: str, draw: Any, sidecar: bool = False) -> Any:
 
 def cmd_bound(args: argparse.Namespace) -> int:
     """Print code-size bounds and the largest arrays they allow."""
-    from ..pattern.bounds import bound_report
-
     try:
         constraints = _constraints(args)
     except ValueError as exc:
@@ -216,8 +218,6 @@ def cmd_bound(args: argparse.Namespace) -> int:
 
 def cmd_benchmark(args: argparse.Namespace) -> int:
     """Rerun the method's Table I with every generator; write a markdown table."""
-    from ..pattern.benchmark import run_benchmark
-
     table = run_benchmark(seeds=args.seeds, time_limit=args.time_limit,
                           algorithms=args.algorithms, rows_filter=args.only,
                           progress=not args.quiet)
@@ -229,12 +229,10 @@ def cmd_benchmark(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction, summary: str | None = None) -> None:
     """Add the ``pattern`` subcommand and its sub-subcommands."""
-    from ..pattern.generators import DESCRIPTIONS, GENERATORS
-
     parser = subparsers.add_parser(
-        "pattern", help="M-array pattern: generate, verify, render, bound, benchmark",
+        "pattern", help=summary,
         description="M-array patterns: every m x n window differs from every other in at "
                     "least h cells.")
     sub = parser.add_subparsers(dest="pattern_command", metavar="ACTION")

@@ -1,11 +1,10 @@
 """`tactile-sl replay IN.mcap -o OUT.mcap [--sensor S.yaml]`: the decoder, offline.
 
-Runs the same :class:`~tactile_sl_decoder.pipeline.StereoPipeline` and
-:class:`~tactile_sl_decoder.touch.stage.TouchStage` as the ``decoder`` node over every stereo
-frame of a bag and writes ``/tactile/points`` (contract PointCloud2) for each frame that
-produced at least one point, and the touch outputs (``field``, ``wrench``, ``contact``,
-``depth``, ``slip``) for every frame after the reference, all stamped exactly like their
-input frame.
+Runs the same :class:`~tactile_sl_decoder.sensor_step.SensorStep` (pipeline, touch stage,
+tare policy) as the ``decoder`` node over every stereo frame of a bag and writes
+``/tactile/points`` (contract PointCloud2) for each frame that produced at least one point,
+and the touch outputs (``field``, ``wrench``, ``contact``, ``depth``, ``slip``) for every
+frame after the reference, all stamped exactly like their input frame.
 """
 from __future__ import annotations
 
@@ -13,15 +12,33 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from tactile_sl_common.bag_io import BagError, BagReader, BagWriter
+from tactile_sl_common.clouds import cloud_fields
+from tactile_sl_common.images import ImageFormatError, to_gray
+from tactile_sl_common.safe_files import OutputError, check_output, same_file
+from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
 from tactile_sl_decoder.cli.argtypes import number
+from tactile_sl_decoder.decode.codewords import PatternError
+from tactile_sl_decoder.frames import bag_frames, bag_topics, count_bag_frames
+from tactile_sl_decoder.glyphs import PipelineInputError
+from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline
+from tactile_sl_decoder.sensor_step import SensorStep
+from tactile_sl_decoder.tooling.progress import progress_bar
+from tactile_sl_decoder.touch.messages import pose_fields, touch_messages
+from tactile_sl_decoder.touch.reference import residual_warning
+from tactile_sl_decoder.touch.sensor import load_sensor
+from tactile_sl_decoder.touch.stage import TouchParams
+
+if TYPE_CHECKING:
+    from tactile_sl_decoder.touch.driver import TouchFrame
 
 
-def register(subparsers: Any) -> None:
+def register(subparsers: Any, summary: str | None = None) -> None:
     """Add the ``replay`` subcommand."""
     p = subparsers.add_parser(
-        "replay", help="decode a bag offline into /tactile/points (same pipeline as the node)",
+        "replay", help=summary,
         description="Decode every stereo frame of IN.mcap (images + camera_info) and write "
                     "the point clouds to OUT.mcap as /tactile/points.")
     p.add_argument("input", metavar="IN.mcap", help="bag with /tactile/{left,right}/image_raw "
@@ -51,17 +68,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Replay a bag; exit status 0 on success, 1 on bad input files."""
-    from tactile_sl_camera.bag_io import BagError, BagWriter
-    from tactile_sl_camera.clouds import cloud_fields
-    from tactile_sl_camera.images import ImageFormatError, to_gray
-    from tactile_sl_camera.safe_files import OutputError, check_output, same_file
-    from tactile_sl_decoder.checks import check_classifier, load_pattern_spec
-    from tactile_sl_decoder.decode.codewords import PatternError
-    from tactile_sl_decoder.frames import bag_frames, bag_topics
-    from tactile_sl_decoder.glyphs import PipelineInputError
-    from tactile_sl_decoder.pipeline import PipelineParams, StereoPipeline
-    from tactile_sl_decoder.tooling.progress import progress_bar
-
     out_path = Path(args.output)
     try:     # OUT must not be IN: decided by the file system (hard links, bag directories)
         check_output(out_path, [args.input])
@@ -76,16 +82,9 @@ def run(args: argparse.Namespace) -> int:
         pipeline = StereoPipeline(pattern, None, params)
         check_classifier(pipeline.load_classifier(), pattern.symbols,
                          args.classifier or "(shipped)")
-        touch = None
-        if not args.no_touch:
-            from tactile_sl_decoder.touch.sensor import load_sensor
-            from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
-
-            sensor = load_sensor(args.sensor)
-            touch = TouchStage(sensor, pattern.array.shape, pattern.pitch_m,
-                               bool(args.mirrored),
-                               TouchParams(reference_frames=args.reference_frames))
-        total = _count_input_frames(args, touch is not None)
+        sensor = None if args.no_touch else load_sensor(args.sensor)
+        step = SensorStep(pipeline, sensor, TouchParams(reference_frames=args.reference_frames))
+        total = _count_input_frames(args, sensor is not None)
     except (BagError, PatternError, OSError, ValueError) as exc:
         if pipeline is not None:
             pipeline.close()
@@ -106,9 +105,8 @@ def run(args: argparse.Namespace) -> int:
                 try:
                     if frame.left_info is None or frame.right_info is None:
                         raise PipelineInputError("no camera_info for this frame")
-                    result = pipeline.process(to_gray(frame.left_image),
-                                              to_gray(frame.right_image),
-                                              frame.left_info, frame.right_info)
+                    out = step.process(to_gray(frame.left_image), to_gray(frame.right_image),
+                                       frame.left_info, frame.right_info)
                 except (PipelineInputError, ImageFormatError) as exc:
                     skipped += 1
                     if show:
@@ -116,15 +114,18 @@ def run(args: argparse.Namespace) -> int:
                     print(f"tactile-sl replay: frame {frame.stamp[0]}.{frame.stamp[1]:09d} "
                           f"skipped: {exc}", file=sys.stderr)
                     continue
+                result = out.stereo
                 if len(result.points) == 0:
                     empty += 1
                     continue
                 msg = cloud_fields(result.points, frame.stamp, result.frame_id)
                 writer.write(topic, "sensor_msgs/msg/PointCloud2", msg, frame.stamp_ns)
                 written += 1
-                touch_written += _write_touch(writer, touch, result, frame, prefix)
+                if step.touch is not None:
+                    touch_written += _write_touch(writer, out.touch, frame, prefix,
+                                                  step.touch.stage.sensor.pad_frame)
             _check_produced(written, skipped, empty, touch_written,
-                            args.reference_frames if touch is not None else 0)
+                            args.reference_frames if sensor is not None else 0)
     except (BagError, OSError, NothingProduced) as exc:
         if show:
             sys.stderr.write("\n")
@@ -138,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     frames = written + skipped + empty
     print(f"replay: {frames} stereo frames in {dt:.1f} s ({frames / max(dt, 1e-9):.1f} fps): "
           f"{written} clouds written to {out_path}, {empty} without points, {skipped} skipped"
-          + (f"; touch outputs for {touch_written} frames" if touch is not None else ""),
+          + (f"; touch outputs for {touch_written} frames" if sensor is not None else ""),
           file=sys.stderr)
     return 0
 
@@ -149,9 +150,6 @@ def _count_input_frames(args: argparse.Namespace, touch: bool) -> int:
     Raises BagError (unreadable, topics missing, no frames) or ValueError (the touch
     reference would take every frame: no touch output could follow).
     """
-    from tactile_sl_camera.bag_io import BagError, BagReader
-    from tactile_sl_decoder.frames import bag_topics, count_bag_frames
-
     reader = BagReader(args.input)
     topics = bag_topics(args.namespace)
     reader.require_topics([topics[k] for k in ("left_image", "right_image", "left_info",
@@ -190,31 +188,29 @@ def _check_produced(written: int, skipped: int, empty: int, touch_written: int,
                               f"--no-touch for the points alone")
 
 
-def _write_touch(writer: Any, touch: Any, result: Any, frame: Any, prefix: str) -> int:
-    """Touch outputs of one frame into the bag (1 if written, 0 while building the reference)."""
-    if touch is None:
-        return 0
-    from tactile_sl_decoder.touch.messages import pose_fields, touch_messages
-    from tactile_sl_decoder.touch.reference import ReferenceError, residual_warning
+def _write_touch(writer: Any, touch: "TouchFrame", frame: Any, prefix: str,
+                 pad_frame: str) -> int:
+    """Touch outputs of one frame into the bag (1 if written, 0 while building the reference).
 
-    had_reference = touch.ready
-    try:
-        outputs = touch.update(result.points)
-    except ReferenceError as exc:
+    Offline the reference is prepared in line: it is ready at the frame that completes it,
+    and every later frame has outputs (none waits, so there is no backlog).
+    """
+    if touch.reference_failed is not None:
         print(f"tactile-sl replay: frame {frame.stamp[0]}.{frame.stamp[1]:09d}: reference not "
-              f"usable ({exc}); trying again with the next frames", file=sys.stderr)
-        touch.tare()
+              f"usable ({touch.reference_failed}); trying again with the next frames",
+              file=sys.stderr)
         return 0
-    if outputs is None:
-        if touch.ready and not had_reference:        # the reference was just taken
-            pose = pose_fields(touch.reference.pose, frame.stamp, result.frame_id)
+    if touch.result is None:
+        ready = touch.reference_ready
+        if ready is not None:                        # the reference was just taken
+            pose = pose_fields(ready.reference.pose, frame.stamp, ready.frame_id)
             writer.write(f"{prefix}/pad_pose", "geometry_msgs/msg/PoseStamped", pose,
                          frame.stamp_ns)
-            warning = residual_warning(touch.reference.pose.residual_rms)
+            warning = residual_warning(ready.reference.pose.residual_rms)
             if warning is not None:
                 print(f"tactile-sl replay: WARNING: reference at frame {frame.stamp[0]}."
                       f"{frame.stamp[1]:09d}: {warning}", file=sys.stderr)
         return 0
-    for name, schema, fields in touch_messages(outputs, frame.stamp, touch.sensor.pad_frame):
+    for name, schema, fields in touch_messages(touch.result, frame.stamp, pad_frame):
         writer.write(f"{prefix}/{name}", schema, fields, frame.stamp_ns)
     return 1

@@ -7,6 +7,9 @@ import time
 from pathlib import Path
 from typing import Any
 
+import torch
+
+from tactile_sl_common.safe_files import OutputError, atomic_path, check_output, write_text
 from tactile_sl_decoder.classify.classifier import (
     ARCH,
     ARCH_DESCRIPTIONS,
@@ -14,12 +17,22 @@ from tactile_sl_decoder.classify.classifier import (
     default_weights_path,
 )
 from tactile_sl_decoder.cli.argtypes import number
+from tactile_sl_decoder.tooling.training import (
+    DEFAULT_PRIMITIVES,
+    HELDOUT_KINDS,
+    TRAIN_KINDS,
+    Progress,
+    model_card,
+    render_dataset,
+    save_blob,
+    train,
+)
 
 
-def register(subparsers: Any) -> None:
+def register(subparsers: Any, summary: str | None = None) -> None:
     """Add the ``train`` subcommand."""
     p = subparsers.add_parser(
-        "train", help="train the glyph classifier on simulated images (CPU, minutes)",
+        "train", help=summary,
         description="Render stereo frames with the simulator (random indenters and nuisances), "
         "extract glyphs, label them from the ground truth and train the glyph classifier. "
         "Held-out frames use other seeds and other indenter kinds. Writes the weights "
@@ -50,8 +63,6 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Generate data, train, save weights and card; returns the exit status."""
-    from tactile_sl_camera.safe_files import OutputError, atomic_path, check_output, write_text
-
     out = args.output or default_weights_path()
     card = args.card or out.with_name(out.stem + "_card.md")
     try:     # before minutes of rendering and training: can the results be written?
@@ -61,18 +72,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"train: {exc}", file=sys.stderr)
         return 1
 
-    import torch
 
-    from tactile_sl_decoder.tooling.training import (
-        DEFAULT_PRIMITIVES,
-        HELDOUT_KINDS,
-        TRAIN_KINDS,
-        Progress,
-        model_card,
-        render_dataset,
-        save_blob,
-        train,
-    )
 
     if args.frames < 1 or args.val_frames < 1 or args.epochs < 1:
         print("train: --frames, --val-frames and --epochs must be >= 1", file=sys.stderr)
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         print(f"train: cannot write {out}: {exc.strerror or exc}", file=sys.stderr)
         return 1
-    note = (f"Simulator frames (`tactile_sl_camera.sim`, shipped artwork), both cameras: "
+    note = (f"Simulator frames (`tactile_sl_sim`, shipped artwork), both cameras: "
             f"{args.frames} training frames (seed {args.seed}, indenters "
             f"{', '.join(TRAIN_KINDS)}) and {args.val_frames} held-out frames (seed "
             f"{args.seed + 7919}, indenters {', '.join(HELDOUT_KINDS)}); 0-2 indenters per "

@@ -28,13 +28,13 @@ from dataclasses import dataclass
 from itertools import combinations, product
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
+from numpy.lib.stride_tricks import sliding_window_view
 from scipy.spatial import cKDTree
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.decode.grid import NEIGHBOUR_SLOTS, OFFSETS, Grid, window_indices
-from tactile_sl_decoder.decode.votes import group_votes
+from tactile_sl_decoder.decode.votes import group_votes, linked_regions
 
 DIRECT_TABLE_MAX = 1 << 22   # code spaces up to this size are looked up by direct address
 
@@ -47,18 +47,36 @@ class PatternError(ValueError):
 class DecodeParams:
     """Thresholds of codeword decoding and of the consistency checks."""
 
-    min_confidence: float = 0.5     # labels below this confidence count as unknown
-    max_errors: int = -1            # substitutions corrected per window; -1: (h - 1) // 2
-    max_erasures: int = -1          # unknown cells tolerated per window (no errors); -1: h - 1
-    retry_confidence: float = 0.9   # erase the least confident label (if below) and retry
-    min_votes: int = 2              # agreeing window votes needed to accept a glyph's cell
-    vote_ratio: float = 0.7         # the winning cell's share of all votes for the glyph
-    grow_iterations: int = 12       # passes extending decoded regions to undecided glyphs
-    grow_min_agree: int = 2         # decided neighbours that must agree to grow a glyph
-    grow_min_agree_mismatch: int = 4  # ... when its own label contradicts that cell
-    min_component: int = 16         # smallest consistent island of decoded glyphs kept
-    island_check_px: float = 4.0    # islands near the main region must fit it (x spacing)
-    mirrored: bool = False          # cameras see the artwork mirrored (columns reversed)
+    min_confidence: float = 0.5
+    """Labels below this confidence count as unknown."""
+    max_errors: int = -1
+    """Substitutions corrected per window; -1: (h - 1) // 2."""
+    max_erasures: int = -1
+    """Unknown cells tolerated per window (no errors); -1: h - 1."""
+    retry_confidence: float = 0.9
+    """Erase the least confident label (if below this) and retry."""
+    min_votes: int = 2
+    """Agreeing window decodes needed before a glyph gets a cell."""
+    vote_ratio: float = 0.7
+    """The winning cell's share of all votes for the glyph."""
+    grow_iterations: int = 12
+    """Passes extending decoded regions to undecided glyphs."""
+    grow_min_agree: int = 2
+    """Decided neighbours that must agree to grow a glyph ..."""
+    grow_min_agree_mismatch: int = 4
+    """... when its own label contradicts that cell."""
+    min_component: int = 16
+    """Smallest region of mutually consistent decoded glyphs that is kept."""
+    island_check_px: float = 4.0
+    """Islands near the main region must fit it (x spacing)."""
+    mirrored: bool = False
+    """The cameras see the artwork mirrored (looking through the elastomer): columns
+    reversed."""
+
+
+DECODE_SETTINGS = SettingsTable(DecodeParams, fields=("mirrored", "min_votes", "min_component"),
+                                ranges={"min_votes": (1, 100), "min_component": (1, 100000)})
+"""The decoder node's live ``mirrored``, ``min_votes`` and ``min_component`` parameters."""
 
 
 @dataclass
@@ -114,7 +132,6 @@ class Codebook:
         self.weights = self.base ** np.arange(self.n, dtype=np.int64)
 
         # All windows, (M, n) row-major, and their anchor cells.
-        from numpy.lib.stride_tricks import sliding_window_view
         win = sliding_window_view(self.array, (wr, wc)).reshape(-1, self.n)
         nr, nc = self.rows - wr + 1, self.cols - wc + 1
         ar, ac = np.meshgrid(np.arange(nr) + self.anchor[0], np.arange(nc) + self.anchor[1],
@@ -442,18 +459,13 @@ class CodewordDecoder:
         consistent but misplaced patch, e.g. a misread that copies another pattern area).
         """
         p = self.params
-        n = len(cell)
         dec = np.flatnonzero(cell >= 0)
         if len(dec) == 0:
             return cell
         _, implied = self._expected(grid.nbr, cell, lay, links)
         ok = (implied == cell[:, None]) & (cell[:, None] >= 0)
-        # CSR straight from the neighbour table (8 slots per glyph; no link = self loop);
-        # float64 weights and int32 indices are what csgraph works in (no conversion copies).
-        indices = np.where(ok, grid.nbr[:, NEIGHBOUR_SLOTS], np.arange(n)[:, None]).astype(np.int32)
-        graph = csr_matrix((np.ones(8 * n), indices.reshape(-1),
-                            np.arange(0, 8 * n + 1, 8, dtype=np.int32)), shape=(n, n))
-        _, comp = connected_components(graph, directed=False)
+        comp = linked_regions(np.ascontiguousarray(grid.nbr[:, NEIGHBOUR_SLOTS], dtype=np.int64),
+                              np.ascontiguousarray(ok))
         sizes = np.bincount(comp[dec], minlength=comp.max() + 1)
         keep = sizes[comp] >= p.min_component
         # The largest region of each image (group) is the reference for its other regions.

@@ -1,9 +1,11 @@
-"""Window votes per glyph: each decoded window votes for the cell of every glyph in it.
+"""Window votes per glyph and linked regions of decoded glyphs (the decoder's counting steps).
 
 Per glyph, the cell with the most votes wins unless another cell has as many (a tie is no
 winner).  Compiled with numba (GIL released): a counting sort by glyph and a count of the
 few (at most one per window holding the glyph) distinct cells each, instead of sorting all
-votes; the same winners, counts and order as the numpy version it replaced (tests).
+votes; the same winners, counts and order as the numpy version it replaced.  The regions
+of glyphs linked by consistent lattice neighbours come from a union-find, numbered as scipy's
+connected components numbered them (tests).
 """
 from __future__ import annotations
 
@@ -79,3 +81,42 @@ def group_votes(glyph: np.ndarray, cell: np.ndarray
         out_total[k] = b - a
         k += 1
     return out_g, out_c, out_top, out_total
+
+
+@helper
+def _root(parent: np.ndarray, i: int) -> int:
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]        # path halving
+        i = parent[i]
+    return i
+
+
+@kernel("int32[::1](int64[:, ::1], boolean[:, ::1])")
+def linked_regions(neighbours: np.ndarray, linked: np.ndarray) -> np.ndarray:
+    """Connected regions of glyphs joined by the links ``linked[i, k]`` to ``neighbours[i, k]``.
+
+    Links count both ways.  Regions are numbered in the order of their first glyph, as
+    ``scipy.sparse.csgraph.connected_components(directed=False)`` numbers them (union-find
+    with path halving instead of a sparse graph; tests).
+    """
+    n, k = neighbours.shape
+    parent = np.arange(n)
+    for i in range(n):
+        for s in range(k):
+            if linked[i, s] and neighbours[i, s] >= 0:
+                a, b = _root(parent, i), _root(parent, neighbours[i, s])
+                if a != b:
+                    if a < b:
+                        parent[b] = a
+                    else:
+                        parent[a] = b
+    label = np.full(n, -1, np.int32)
+    comp = np.empty(n, np.int32)
+    count = 0
+    for i in range(n):
+        r = _root(parent, i)
+        if label[r] < 0:
+            label[r] = count
+            count += 1
+        comp[i] = label[r]
+    return comp

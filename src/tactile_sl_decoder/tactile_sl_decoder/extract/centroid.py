@@ -15,6 +15,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from tactile_sl_decoder.extract.patches import sample_patches
+
 _MOMENT_BLOCK = 256  # patches per product in patch_centroid_offset
 CLOSING_SPACINGS = 0.75
 """Side of the square grey closing that estimates the background under glyphs, in glyph
@@ -143,8 +145,6 @@ def closing_background(gray: np.ndarray, u: np.ndarray, v: np.ndarray, step: np.
     of the smallest image region holding those patches plus the closing's reach (so it equals
     the whole image's closing there), resampled like the patches themselves.
     """
-    from tactile_sl_decoder.extract.extraction import sample_patches
-
     side = int(2 * round(CLOSING_SPACINGS * max(spacing, 1.0) / 2) + 1)
 
     def patches_at(idx: np.ndarray) -> np.ndarray:

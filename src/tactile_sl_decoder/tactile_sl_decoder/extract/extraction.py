@@ -23,11 +23,11 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.extract.centroid import closing_background, patch_centroid_offset
+from tactile_sl_decoder.extract.patches import sample_patches
 from tactile_sl_decoder.extract.spacing import estimate_spacing, median
-
-_REMAP_MAX_ROWS = 32000  # cv2.remap wants maps smaller than SHRT_MAX rows
 
 
 @dataclass
@@ -117,6 +117,30 @@ class ExtractionParams:
     """Inside those regions, split the parts that are still linked (glyphs joined by the
     stripes of a striped object seen through the pad) by Otsu's threshold of each part's
     ink ratio: the printed ink is darker than anything seen through the pad."""
+
+    def validate(self) -> "ExtractionParams":
+        """Raise ValueError naming the first setting outside :data:`EXTRACTION_SETTINGS`."""
+        EXTRACTION_SETTINGS.check(self)
+        return self
+
+
+def _odd(value: int) -> str | None:
+    return None if int(value) % 2 else "must be odd (adaptive threshold window)"
+
+
+EXTRACTION_SETTINGS = SettingsTable(ExtractionParams, ranges={
+    "block_size": (3, 1001), "offset": (-255.0, 255.0), "open_size": (0, 51),
+    "min_area_px": (0.0, 1e6), "min_area_ratio": (0.0, 100.0), "split_ratio": (1.0, 100.0),
+    "triple_ratio": (1.0, 100.0), "max_area_ratio": (1.0, 1000.0),
+    "split_iterations": (0, 100), "min_split_distance": (0.0, 10.0),
+    "core_radius": (0.0, 10.0), "min_core_fill": (0.0, 1.0), "patch_size": (4, 256),
+    "patch_span": (0.1, 10.0), "default_spacing_px": (1.0, 10000.0),
+    "large_offset": (-255.0, 255.0), "refine_split": (0, 5),
+    "split_centroid_radius": (0.05, 0.5), "centroid_level": (0.0, 1.0),
+    "centroid_plane_misfit": (0.0, 10.0), "centroid_background_step": (0.0, 10.0),
+}, read_only=("patch_size",), checks={"block_size": _odd})
+"""Every field is a node parameter (``symbol_extractor``: bare, ``decoder``:
+``extraction.<field>``); ``patch_size`` is the classifier's input size, set at start only."""
 
 
 @dataclass
@@ -517,28 +541,3 @@ def split_regions(labels: np.ndarray, stats: np.ndarray, ids: np.ndarray, k: np.
     counts = np.bincount(slot, minlength=3 * n).reshape(n, 3).astype(np.float64)
     ok = (slots[None, :] < k[:, None]) & (counts > 0)
     return seed_u[ok], seed_v[ok], counts[ok]
-
-
-def sample_patches(gray: np.ndarray, u: np.ndarray, v: np.ndarray, step: np.ndarray,
-                   size: int = PATCH_SIZE) -> np.ndarray:
-    """(N, size, size) bilinear patches centred on (u, v) with ``step`` image px per patch px.
-
-    One cv2.remap over a sampling map with one row per patch (its size*size samples in
-    row-major order), so that the remapped image already is the (N, size, size) stack;
-    outside the image the border pixel is repeated.
-    """
-    n = len(u)
-    if n == 0:
-        return np.zeros((0, size, size), np.uint8)
-    grid = (np.arange(size, dtype=np.float32) - (size - 1) / 2.0)
-    offsets = grid * np.asarray(step, np.float32)[:, None]  # (n, size)
-    # x varies along a patch row, y down a patch column: each map is one small (n, size)
-    # array repeated, as a whole (x) or element by element (y), along the row
-    map_x = np.tile(np.asarray(u, np.float32)[:, None] + offsets, (1, size))
-    map_y = np.repeat(np.asarray(v, np.float32)[:, None] + offsets, size, axis=1)
-    out = np.empty((n, size * size), np.uint8)
-    for start in range(0, n, _REMAP_MAX_ROWS):
-        stop = min(n, start + _REMAP_MAX_ROWS)
-        cv2.remap(gray, map_x[start:stop], map_y[start:stop], cv2.INTER_LINEAR,
-                  dst=out[start:stop], borderMode=cv2.BORDER_REPLICATE)
-    return out.reshape(n, size, size)

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from tactile_sl_common.settings import SettingsTable, scalar_fields
+from tactile_sl_decoder.calibrate.health import HealthLimits
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.touch.reference import RESIDUAL_WARN_M, residual_warning
 
@@ -62,6 +64,11 @@ class DiagnosticLimits:
     calibration_error_factor: float = 3.0
     """A calibration health figure beyond this multiple of its limit: ERROR (beyond the
     limit itself: WARN)."""
+
+
+DIAGNOSTIC_SETTINGS = SettingsTable(DiagnosticLimits, ranges={
+    name: (0.0, 1e6) for name in scalar_fields(DiagnosticLimits)})
+"""The decoder node's live ``diagnostics.<field>`` parameters."""
 
 
 @dataclass
@@ -380,8 +387,6 @@ def calibration_status(report: Any, limits: DiagnosticLimits,
     for swapped files, or for a pad triangulated behind the cameras.
     """
     if health_limits is None:
-        from tactile_sl_decoder.calibrate.health import HealthLimits
-
         health_limits = HealthLimits()
     values = {k: _fmt(v) for k, v in report.as_dict().items()}
     figures = (f"residual {report.reprojection_rms_px:.3f} px, flatness "

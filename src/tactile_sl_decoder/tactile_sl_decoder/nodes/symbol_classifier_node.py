@@ -13,8 +13,8 @@ import time
 
 from rclpy.node import Node
 
-from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
-from tactile_sl_camera.nodes.runner import run_node
+from tactile_sl_common.nodes.parameters import LiveParameters, declare_qos
+from tactile_sl_common.nodes.runner import run_node
 from tactile_sl_decoder.classify.classifier import Classifier
 from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.cpu_threads import set_cpu_threads

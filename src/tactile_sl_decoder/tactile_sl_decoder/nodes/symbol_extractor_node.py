@@ -21,13 +21,16 @@ import cv2
 from rclpy.node import Node
 from sensor_msgs.msg import Image
 
-from tactile_sl_camera.images import ImageFormatError, to_gray
-from tactile_sl_camera.nodes.parameters import LiveParameters, declare_qos
-from tactile_sl_camera.nodes.runner import run_node
-from tactile_sl_decoder.extract.extraction import extract_symbols
+from tactile_sl_common.images import ImageFormatError, to_gray
+from tactile_sl_common.nodes.parameters import LiveParameters, declare_qos
+from tactile_sl_common.nodes.runner import run_node
+from tactile_sl_decoder.extract.extraction import (
+    EXTRACTION_SETTINGS,
+    ExtractionParams,
+    extract_symbols,
+)
 from tactile_sl_decoder.frames import StampThrottle, stamp_ns
 from tactile_sl_decoder.glyphs import Glyphs
-from tactile_sl_decoder.nodes.extraction_parameters import declare_extraction
 from tactile_sl_decoder.symbol_array import fill_message
 from tactile_sl_msgs.msg import SymbolArray
 
@@ -38,7 +41,9 @@ class SymbolExtractorNode(Node):
     def __init__(self) -> None:
         super().__init__("symbol_extractor")
         self.live = LiveParameters(self)
-        self.params = declare_extraction(self.live, "", self._set_extraction)
+        self.params = self.live.declare_table(EXTRACTION_SETTINGS, ExtractionParams(),
+                                              apply=self._set_extraction,
+                                              current=lambda: self.params)
         self.publish_patches = bool(self.live.declare(
             "publish_patches", True, "Send the 18x18 patches (the classifier node needs them).",
             apply=lambda v: setattr(self, "publish_patches", bool(v))))

@@ -5,24 +5,26 @@ Publishes (relative names, reliable, depth 5; pad frame): ``field`` (PointCloud2
 ``slip`` (tactile_sl_msgs/Slip), ``slip_markers`` (visualization_msgs/MarkerArray, for RViz),
 and ``pad_pose`` (PoseStamped of the pad frame in the left optical frame, transient local,
 plus ``/tf_static`` when tf2_ros is importable, i.e. on a system ROS install).  The work is
-:class:`tactile_sl_decoder.touch.stage.TouchStage`; message fields come from
+the node's :class:`~tactile_sl_decoder.sensor_step.SensorStep` (its
+:class:`~tactile_sl_decoder.touch.driver.TouchDriver`); message fields come from
 :mod:`tactile_sl_decoder.touch.messages`, the same dicts ``tactile-sl replay`` writes.
 """
 from __future__ import annotations
 
 import array
-from typing import TYPE_CHECKING, Any
+from typing import Any, Callable
 
-import numpy as np
 from geometry_msgs.msg import Point, PoseStamped, Vector3, WrenchStamped
+from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import ColorRGBA
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from tactile_sl_camera.nodes.camera_common import apply_header, cloud_msg, image_msg
-from tactile_sl_camera.nodes.parameters import declare_qos
+from tactile_sl_common.nodes.messages import apply_header, cloud_msg, image_msg
+from tactile_sl_common.nodes.parameters import LiveParameters, declare_qos
+from tactile_sl_decoder.touch.driver import ReferenceReady, TouchDriver, TouchFrame
 from tactile_sl_decoder.touch.messages import (
     contact_fields,
     depth_fields,
@@ -32,12 +34,8 @@ from tactile_sl_decoder.touch.messages import (
     slip_markers,
     wrench_fields,
 )
-from tactile_sl_decoder.touch.reference import ReferenceError, residual_warning
-from tactile_sl_decoder.touch.sensor import load_sensor
-from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
-
-if TYPE_CHECKING:   # the one node that owns these outputs (imports this module at run time)
-    from tactile_sl_decoder.nodes.decoder_node import DecoderNode
+from tactile_sl_decoder.touch.reference import residual_warning
+from tactile_sl_decoder.touch.stage import TouchResult
 
 try:
     from tactile_sl_msgs.msg import Contact, Slip
@@ -52,14 +50,7 @@ except ImportError:
 
 
 CATCH_UP_BURST = 3
-"""Frames of a reference's backlog published per wake-up (see _publish_caught_up)."""
-
-
-def _hysteresis(values: dict[str, Any]) -> str | None:
-    on, off = values.get("contact_force_on"), values.get("contact_force_off")
-    if on is not None and off is not None and off > on:
-        return f"contact_force_off ({off}) must not exceed contact_force_on ({on})"
-    return None
+"""Frames of a reference's backlog published per wake-up (see TouchOutputs.publish)."""
 
 
 def _vec(cls: Any, d: dict[str, float]) -> Any:
@@ -136,72 +127,23 @@ def pose_msg(fields: dict[str, Any]) -> PoseStamped:
 
 
 class TouchOutputs:
-    """Everything touch-related of the decoder node."""
+    """The touch outputs of the decoder node: publishers, the tare service, the pad pose."""
 
-    def __init__(self, node: DecoderNode, shape: tuple[int, int], pitch: float, mirrored: bool,
-                 out_qos: QoSProfile) -> None:
+    def __init__(self, node: Node, live: LiveParameters, driver: TouchDriver, frame_prefix: str,
+                 out_qos: QoSProfile, poll: Callable[[], TouchFrame | None]) -> None:
+        """Publishers, the tare service and the reference's poll timer.
+
+        ``poll`` installs a reference prepared in the background (SensorStep.poll_touch: its
+        outputs come back through :meth:`publish_frame`, or are returned).
+        """
         self.node = node
-        self.shape, self.pitch = shape, pitch
-        live = node.params         # the node's one parameter mechanism
-        ref = " The reference is taken with it."
-        enabled = live.declare("touch", True, "Publish field, wrench, contact, depth, slip "
-                               "and pad_pose (needs an untouched pad at start: the "
-                               "reference).", read_only=True)
-        sensor_file = live.declare("sensor_file", "", "Sensor YAML (elastomer, pad frame); "
-                                   "empty = the shipped one.", read_only=True)
-        reference_frames = live.declare(
-            "reference_frames", 1, "Decoded frames averaged into the untouched reference (at "
-            "start and after each tare)." + ref, (1, 1000), read_only=True)
-        youngs = live.declare("elastomer.youngs_modulus", -1.0, "Pa; overrides the sensor "
-                              "file (< 0 = the file's value)." + ref, (-1.0, 1e12),
-                              read_only=True)
-        poisson = live.declare("elastomer.poisson_ratio", -1.0, "Overrides the sensor file "
-                               "(< 0 = the file's value), 0..0.5." + ref, (-1.0, 0.5),
-                               read_only=True)
-        thickness = live.declare("elastomer.thickness", -1.0, "m, layer bonded to a rigid "
-                                 "window, 0 = half-space; overrides the sensor file (< 0 = "
-                                 "the file's value)." + ref, (-1.0, 1.0), read_only=True)
-        pad_frame = live.declare("pad_frame", "", "Frame id of the touch outputs; empty = "
-                                 "the sensor file's.", read_only=True)
-        defaults = TouchParams()
-        force_on = live.declare("contact_force_on", defaults.contact.force_on,
-                                "N: in_contact turns on above this normal force",
-                                (1e-4, 100.0), apply=lambda v: self._set("force_on", v))
-        force_off = live.declare("contact_force_off", defaults.contact.force_off,
-                                 "N: in_contact turns off below this normal force "
-                                 "(hysteresis; <= contact_force_on)", (1e-4, 100.0),
-                                 apply=lambda v: self._set("force_off", v))
-        tare_max_depth = live.declare(
-            "tare_max_depth", defaults.tare_max_depth, "m: a tare is refused while the pad is "
-            "pressed in deeper than this (or in contact)", (1e-7, 0.01),
-            apply=lambda v: self._set("tare_max_depth", v))
-        max_pending = live.declare(
-            "max_pending_frames", defaults.max_pending_frames, "Frames kept while a new "
-            "reference is prepared in the background (about 1-2 s at start, or after a tare "
-            "that changes the reference's cells); they get their touch outputs, late, once it "
-            "is ready. Beyond this many the oldest are dropped (counted in diagnostics).",
-            (0, 100000), read_only=True)
-        live.check_together(_hysteresis)
-        self.enabled = bool(enabled)
+        self.driver = driver
+        self._poll = poll
         self.announced_waiting = False
         self.tares = 0             # tares accepted (the reference is taken again)
         self.last_tare = ""        # the answer to the last tare request
-        if not self.enabled:
-            return
-
-        def override(value: float) -> float | None:
-            return None if float(value) < 0 else float(value)
-
-        sensor = load_sensor(str(sensor_file) or None).with_overrides(
-            override(youngs), override(poisson), override(thickness), str(pad_frame) or None)
-        params = TouchParams(reference_frames=int(reference_frames))
-        params.contact.force_on = float(force_on)
-        params.contact.force_off = float(force_off)
-        params.tare_max_depth = float(tare_max_depth)
-        params.max_pending_frames = int(max_pending)
-        # the reference is prepared in a worker thread: images keep flowing meanwhile
-        self.stage = TouchStage(sensor, shape, pitch, mirrored, params, background=True)
-        self.frame_id = str(getattr(node, "frame_prefix", "")) + sensor.pad_frame
+        sensor = driver.stage.sensor
+        self.frame_id = frame_prefix + sensor.pad_frame
         self.pub_field = node.create_publisher(PointCloud2, "field", out_qos)
         self.pub_wrench = node.create_publisher(WrenchStamped, "wrench", out_qos)
         self.pub_contact = node.create_publisher(Contact, "contact", out_qos)
@@ -213,39 +155,24 @@ class TouchOutputs:
         self.pub_pose = node.create_publisher(PoseStamped, "pad_pose", latched)
         self.tf = StaticTransformBroadcaster(node) if StaticTransformBroadcaster else None
         node.create_service(Trigger, "tare", self._on_tare)
-        # announce (and install) a reference prepared in the background as soon as it is done;
-        # the timer runs only while one is being prepared (no wake-ups otherwise)
+        # announce (and install) a reference prepared in the background as soon as it is
+        # done, and publish its backlog: a 20 Hz timer that looks at two flags otherwise (the
+        # touch worker cannot start a timer, and the events executor has no guard conditions)
         self._poll_timer = node.create_timer(0.05, self._poll_reference)
-        self._poll_timer.cancel()
-        # stamp and camera frame of the frame that completed the reference (for pad_pose)
-        self._reference_frame: tuple[tuple[int, int], str] = ((0, 0), "")
         e = sensor.elastomer
         node.get_logger().info(
             f"touch: E {e.youngs_modulus:.3g} Pa, nu {e.poisson_ratio:.3g}, "
             f"{'half-space' if e.thickness == 0 else f'layer {e.thickness * 1e3:.3g} mm'} "
             f"({sensor.source}); pad frame {self.frame_id}")
 
-    def _set(self, name: str, value: float) -> None:
-        """Apply a live touch setting to the running stage."""
-        if not self.enabled:
-            return
-        if name == "tare_max_depth":
-            self.stage.params.tare_max_depth = float(value)
-        else:
-            setattr(self.stage.params.contact, name, float(value))
-
-    def restart(self, mirrored: bool) -> None:
-        """A new stage (new reference from the next frames) after a change of ``mirrored``."""
-        if not self.enabled:
-            return
-        self.stage = TouchStage(self.stage.sensor, self.shape, self.pitch, mirrored,
-                                self.stage.params, background=True)
+    def restarted(self) -> None:
+        """The stage was restarted (``mirrored`` changed): a new reference is taken."""
         self.announced_waiting = False
         self.node.get_logger().info("mirrored changed: the touch reference is taken again "
                                     "from the next decoded frames (the pad must be untouched)")
 
     def _on_tare(self, _request: Any, response: Any) -> Any:
-        ok, text = self.stage.tare()
+        ok, text = self.driver.tare()
         response.success, response.message = ok, text
         self.tares += int(ok)
         self.last_tare = f"{'accepted' if ok else 'refused'}: {text}"
@@ -260,58 +187,54 @@ class TouchOutputs:
 
     def _poll_reference(self) -> None:
         """Timer: a reference finished in the background is installed and announced."""
-        if self.stage.preparing:
-            try:
-                if self.stage.poll():
-                    self._announce_reference(*self._reference_frame)
-            except ReferenceError as exc:
-                self._unusable(exc)
-        self._publish_caught_up()
-        if not self.stage.preparing and not self.stage.caught_up:
-            self._poll_timer.cancel()
+        stage = self.driver.stage
+        if not (stage.preparing or stage.caught_up):
+            return
+        touch = self._poll()
+        if touch is not None:
+            self.publish(touch)
 
-    def _publish_caught_up(self) -> None:
-        """Outputs of frames that waited for the reference, oldest first, a few at a time.
+    def before_frame(self) -> None:
+        """Called with each frame's points (executor thread), before the touch stage runs."""
+        if not self.driver.ready and not self.announced_waiting:
+            self.announced_waiting = True
+            self.node.get_logger().info(
+                f"touch: no outputs until the reference is taken from "
+                f"{self.driver.stage.params.reference_frames} decoded frame(s) of the "
+                f"untouched pad")
+
+    def publish_frame(self, touch: TouchFrame, stamp: tuple[int, int] | None) -> None:
+        """One frame's touch outputs, after those of frames that waited for the reference.
+
+        Called from the touch worker (SensorStep's ``on_touch``); ``stamp`` None: a poll's.
+        """
+        if not self.publish(touch):
+            return
+        if touch.result is not None and stamp is not None:
+            self._publish(touch.result, stamp)
+
+    def publish(self, touch: TouchFrame) -> bool:
+        """The reference's news and the backlog's next outputs; False if the reference failed.
 
         The backlog of a reference's preparation (a second's frames) goes out at most
         ``CATCH_UP_BURST`` frames per wake-up (each frame and the 20 Hz timer), so that a
         subscriber's queue (depth 10 is common) does not overflow and lose the oldest.
         """
-        for stamp, result in self.stage.drain(CATCH_UP_BURST):
+        if touch.reference_failed is not None:
+            self.node.get_logger().warning(
+                f"touch: reference not usable ({touch.reference_failed}); trying again "
+                f"with the next frames")
+            if touch.caught_up:   # after a failure in the timer: the rest of an old backlog
+                for stamp, result in touch.caught_up:
+                    self._publish(result, stamp)
+            return False
+        if touch.reference_ready is not None:
+            self._announce_reference(touch.reference_ready)
+        for stamp, result in touch.caught_up:
             self._publish(result, stamp)
+        return True
 
-    def _unusable(self, exc: ReferenceError) -> None:
-        self.node.get_logger().warning(f"touch: reference not usable ({exc}); trying again "
-                                       f"with the next frames")
-        self.stage.tare()
-
-    def process(self, points: np.ndarray, stamp: tuple[int, int], camera_frame: str) -> None:
-        """Touch outputs of one frame's points (nothing until a reference exists)."""
-        if not self.enabled:
-            return
-        had_reference, was_preparing = self.stage.ready, self.stage.preparing
-        if not had_reference and not self.announced_waiting:
-            self.announced_waiting = True
-            self.node.get_logger().info(
-                f"touch: no outputs until the reference is taken from "
-                f"{self.stage.params.reference_frames} decoded frame(s) of the untouched pad")
-        try:
-            result = self.stage.update(points, tag=stamp)
-        except ReferenceError as exc:
-            self._unusable(exc)
-            return
-        if not had_reference and not was_preparing and (self.stage.preparing
-                                                         or self.stage.ready):
-            self._reference_frame = (stamp, camera_frame)    # this frame completed it
-        if self.stage.ready and not had_reference:
-            self._announce_reference(*self._reference_frame)
-        self._publish_caught_up()
-        if result is not None:
-            self._publish(result, stamp)
-        if (self.stage.preparing or self.stage.caught_up) and self._poll_timer.is_canceled():
-            self._poll_timer.reset()
-
-    def _publish(self, result: Any, stamp: tuple[int, int]) -> None:
+    def _publish(self, result: TouchResult, stamp: tuple[int, int]) -> None:
         """One frame's touch outputs, each built only while something subscribes to it."""
         f = self.frame_id
         if self.pub_field.get_subscription_count():
@@ -329,10 +252,9 @@ class TouchOutputs:
             if self.pub_markers.get_subscription_count():
                 self.pub_markers.publish(markers_msg(slip_markers(result.slip), slip))
 
-    def _announce_reference(self, stamp: tuple[int, int], camera_frame: str) -> None:
-        ref = self.stage.reference
-        assert ref is not None
-        fields = pose_fields(ref.pose, stamp, camera_frame)
+    def _announce_reference(self, ready: ReferenceReady) -> None:
+        ref = ready.reference
+        fields = pose_fields(ref.pose, ready.tag, ready.frame_id)
         self.pub_pose.publish(pose_msg(fields))
         if self.tf is not None:
             t = TransformStamped()

@@ -13,8 +13,11 @@ from typing import Any
 import numpy as np
 import yaml
 
+from tactile_sl_common.safe_files import write_text
+
 from .constraints import Constraints
 from .shapes import default_primitives
+from .verify import verify_pattern
 
 FORMAT_VERSION = 1
 DEFAULT_PITCH_M = 0.0005
@@ -188,8 +191,6 @@ def load_pattern(path: str | Path, verify: bool = True) -> Pattern:
         raise PatternFormatError(f"{path}: not valid YAML ({exc})") from None
     pattern = pattern_from_dict(doc, str(path))
     if verify:
-        from .verify import verify_pattern
-
         cert = verify_pattern(pattern)
         if not cert.valid:
             raise PatternInvalidError(
@@ -218,6 +219,4 @@ def dump_pattern(pattern: Pattern) -> str:
 
 def save_pattern(pattern: Pattern, path: str | Path) -> None:
     """Write the pattern file (the array rows as quoted strings, one per line), atomically."""
-    from tactile_sl_camera.safe_files import write_text
-
     write_text(path, dump_pattern(pattern))

@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from .constraints import Constraints
-from .fileio import Pattern
 
 _BLOCK_BYTES = 1 << 25  # working-set size of one comparison block
 
@@ -159,6 +159,13 @@ def verify_array(array: np.ndarray, constraints: Constraints) -> Certificate:
                        pair_rc, array_sha256(arr))
 
 
-def verify_pattern(pattern: Pattern) -> Certificate:
+class PatternLike(Protocol):
+    """What verification needs of a pattern (:class:`~.fileio.Pattern` is one)."""
+
+    array: np.ndarray
+    constraints: Constraints
+
+
+def verify_pattern(pattern: PatternLike) -> Certificate:
     """Verify a loaded pattern against the constraints its file claims."""
     return verify_array(pattern.array, pattern.constraints)

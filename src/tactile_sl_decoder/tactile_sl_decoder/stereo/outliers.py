@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import maximum_filter
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.jit import helper, kernel
 
 DIRECTIONS = ((0, 1), (1, 0), (1, 1), (1, -1))
@@ -39,10 +40,26 @@ class OutlierParams:
     """Tolerances of the surface test (the decoder node exposes them as parameters)."""
 
     enabled: bool = True
-    min_tolerance_m: float = 1e-4   # floor of the residual tolerance (~1 px of disparity)
-    mad_factor: float = 8.0          # tolerance in robust standard deviations of the frame
-    local_factor: float = 2.0        # and this many times the neighbours' median residual
-    passes: int = 6                  # repeat with the dropped points removed
+    """Drop points that leave the surface their lattice neighbours define."""
+    min_tolerance_m: float = 1e-4
+    """Floor of a point's residual tolerance, m (about 1 px of disparity)."""
+    mad_factor: float = 8.0
+    """Tolerance in robust standard deviations of the frame's residuals."""
+    local_factor: float = 2.0
+    """... or this many times the neighbours' median residual."""
+    passes: int = 6
+    """Repeat with the dropped points removed, at most this often."""
+
+    def validate(self) -> "OutlierParams":
+        """Raise ValueError naming the first setting outside :data:`OUTLIER_SETTINGS`."""
+        OUTLIER_SETTINGS.check(self, "outliers.")
+        return self
+
+
+OUTLIER_SETTINGS = SettingsTable(OutlierParams, ranges={
+    "min_tolerance_m": (1e-6, 0.01), "mad_factor": (0.5, 100.0), "local_factor": (0.5, 100.0),
+    "passes": (1, 50)})
+"""The decoder node's live ``outliers.<field>`` parameters."""
 
 
 def _shift(grid: np.ndarray, dr: int, dc: int) -> np.ndarray:

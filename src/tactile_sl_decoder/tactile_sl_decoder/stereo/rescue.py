@@ -28,7 +28,7 @@ with the extraction's threshold plane), re-sampled around the new centre and rep
 * the classifier does not read another symbol there (unknown or the cell's symbol).
 
 The measurement then meets the same stereo and surface-outlier gates as any other pair
-(:meth:`~tactile_sl_decoder.pipeline.StereoPipeline.triangulate`). Like the detection it
+(:func:`~tactile_sl_decoder.stereo.pair.pair_points`). Like the detection it
 stands in for, it is a measurement of the image: a guided search, the correspondence
 step of model-based tracking (G. Klein and D. Murray, "Parallel Tracking and Mapping for
 Small AR Workspaces", ISMAR 2007, sec. 5.2: patches searched for at their predicted
@@ -43,7 +43,10 @@ from typing import Any, Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
+from tactile_sl_decoder.extract.centroid import patch_centroid_offset
+from tactile_sl_decoder.extract.patches import sample_patches
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.stereo.transfer import cell_table, predict_missing
 
@@ -53,6 +56,8 @@ class RescueParams:
     """Settings of :func:`rescue_pair` (the decoder node's ``rescue.*`` parameters)."""
 
     enabled: bool = True
+    """A cell the other image decoded where this image found no glyph is measured in this
+    image where the neighbouring cells put it."""
     radius: float = 0.2
     """Largest move of the measured centre from the prediction, and largest spread of the
     neighbours' offsets, glyph spacings."""
@@ -66,22 +71,18 @@ class RescueParams:
     centroid_passes: int = 3
     """Centroid passes (each re-samples the patch around the last centre)."""
     grow_passes: int = 8
-    """Growth passes (each can measure cells next to those the last one measured)."""
+    """Growth passes (each can measure cells next to those the last one measured; 0 = off)."""
 
-    def validate(self) -> None:
-        """ValueError naming the setting that is out of range."""
-        if not 0.01 <= self.radius <= 0.45:
-            raise ValueError("rescue.radius must be in [0.01, 0.45] glyph spacings")
-        if not 0.1 <= self.clearance <= 1.0:
-            raise ValueError("rescue.clearance must be in [0.1, 1] glyph spacings")
-        if not 1 <= int(self.min_neighbours) <= 8:
-            raise ValueError("rescue.min_neighbours must be in 1..8")
-        if not 0.0 <= self.min_contrast <= 2.0:
-            raise ValueError("rescue.min_contrast must be in [0, 2]")
-        if not 1 <= int(self.centroid_passes) <= 10:
-            raise ValueError("rescue.centroid_passes must be in 1..10")
-        if not 0 <= int(self.grow_passes) <= 64:
-            raise ValueError("rescue.grow_passes must be in 0..64")
+    def validate(self) -> "RescueParams":
+        """Raise ValueError naming the first setting outside :data:`RESCUE_SETTINGS`."""
+        RESCUE_SETTINGS.check(self, "rescue.")
+        return self
+
+
+RESCUE_SETTINGS = SettingsTable(RescueParams, ranges={
+    "radius": (0.01, 0.45), "clearance": (0.1, 1.0), "min_neighbours": (1, 8),
+    "min_contrast": (0.0, 2.0), "centroid_passes": (1, 10), "grow_passes": (0, 64)})
+"""The decoder node's live ``rescue.<field>`` parameters."""
 
 
 @dataclass
@@ -184,8 +185,6 @@ def _predict(uv_s: np.ndarray, ts: np.ndarray, uv_d: np.ndarray, td: np.ndarray,
 
 def _typical_contrast(dst: Glyphs, gray: np.ndarray, extraction: Any, spacing: float) -> float:
     """Median :func:`ink_contrast` of the glyphs the image's extraction found."""
-    from tactile_sl_decoder.extract.extraction import sample_patches
-
     size = int(extraction.patch_size)
     patches = dst.patches
     if patches is None or len(patches) != len(dst) or patches.shape[1] != size:
@@ -200,9 +199,6 @@ def _measure(gray: np.ndarray, predicted: np.ndarray, symbol: np.ndarray, spacin
              classify: Callable[[np.ndarray], tuple[np.ndarray, Any]], p: RescueParams
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centres (M, 2), readings and acceptance of glyphs looked for at ``predicted``."""
-    from tactile_sl_decoder.extract.centroid import patch_centroid_offset
-    from tactile_sl_decoder.extract.extraction import sample_patches
-
     size = int(extraction.patch_size)
     step = np.full(len(predicted), spacing * extraction.patch_span / size, np.float32)
     u = predicted[:, 0].astype(np.float32)

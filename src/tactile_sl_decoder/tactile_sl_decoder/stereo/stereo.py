@@ -19,7 +19,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from tactile_sl_camera.camera_info import CameraCalibration, CameraInfoError, calibration_from_msg
+from tactile_sl_common.camera_info import CameraCalibration, CameraInfoError, calibration_from_msg
+from tactile_sl_common.settings import SettingsTable
 
 UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-12)
 
@@ -28,9 +29,17 @@ UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-12
 class StereoParams:
     """Plausibility gates of stereo matches."""
 
-    max_reprojection_px: float = 1.5   # rectified reprojection error of a triangulated point
-    min_depth_m: float = 1e-4          # z in the left optical frame
+    max_reprojection_px: float = 1.5
+    """Largest rectified reprojection error of a stereo pair (epipolar gate), px."""
+    min_depth_m: float = 1e-4
+    """Nearest z of a point in the left optical frame, m."""
     max_depth_m: float = 1.0
+    """Farthest z of a point in the left optical frame, m."""
+
+
+STEREO_SETTINGS = SettingsTable(StereoParams, fields=("max_reprojection_px",),
+                                ranges={"max_reprojection_px": (0.01, 1000.0)})
+"""The decoder node's live ``max_reprojection_px`` parameter."""
 
 
 class StereoRig:

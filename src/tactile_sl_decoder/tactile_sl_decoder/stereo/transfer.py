@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.glyphs import Glyphs
 
@@ -47,8 +48,11 @@ class TransferParams:
     """Settings of :func:`transfer_cells` (the decoder node's ``transfer.*`` parameters)."""
 
     enabled: bool = True
+    """A glyph one image could not decode takes the cell the other image decoded where the
+    pair's geometry and the neighbouring cells put it."""
     radius: float = 0.2
-    """Largest distance of the target glyph from the predicted place, glyph spacings."""
+    """Largest distance of the target glyph from the predicted place (and spread of the
+    neighbours' predictions), glyph spacings."""
     clearance: float = 0.55
     """No other target glyph may lie this close (glyph spacings) to the chosen one (checked
     as: the second-nearest glyph lies ``clearance`` + the chosen one's distance away from
@@ -56,18 +60,18 @@ class TransferParams:
     min_neighbours: int = 2
     """Neighbouring cells decoded in both images needed to predict a cell's place."""
     passes: int = 8
-    """Growth passes (each can add cells next to those the last one added)."""
+    """Growth passes (each can add cells next to those the last one added; 0 = off)."""
 
-    def validate(self) -> None:
-        """ValueError naming the setting that is out of range."""
-        if not 0.01 <= self.radius <= 0.45:
-            raise ValueError("transfer.radius must be in [0.01, 0.45] glyph spacings")
-        if not 0.1 <= self.clearance <= 1.0:
-            raise ValueError("transfer.clearance must be in [0.1, 1] glyph spacings")
-        if not 1 <= int(self.min_neighbours) <= 8:
-            raise ValueError("transfer.min_neighbours must be in 1..8")
-        if not 0 <= int(self.passes) <= 64:
-            raise ValueError("transfer.passes must be in 0..64")
+    def validate(self) -> "TransferParams":
+        """Raise ValueError naming the first setting outside :data:`TRANSFER_SETTINGS`."""
+        TRANSFER_SETTINGS.check(self, "transfer.")
+        return self
+
+
+TRANSFER_SETTINGS = SettingsTable(TransferParams, ranges={
+    "radius": (0.01, 0.45), "clearance": (0.1, 1.0), "min_neighbours": (1, 8),
+    "passes": (0, 64)})
+"""The decoder node's live ``transfer.<field>`` parameters."""
 
 
 # the 8 cell offsets of a cell's lattice neighbourhood

@@ -1,9 +1,9 @@
-"""Bag drivers: the shared pipeline over a bag, as ``tactile-sl replay`` runs it (no rclpy).
+"""Bag drivers: the sensor over a bag, as ``tactile-sl replay`` runs it (no rclpy).
 
-``evaluate_bag`` runs the shared :class:`~tactile_sl_decoder.pipeline.StereoPipeline` over
-a bag (the same path as ``tactile-sl replay``) and returns per-frame and per-bag figures.
-``evaluate_touch_bag`` adds the touch stage and returns the touch figures of every frame
-(definitions in :mod:`~tactile_sl_decoder.tooling.e2e_metrics` and
+``evaluate_bag`` runs the shared :class:`~tactile_sl_decoder.sensor_step.SensorStep` (points
+only) over a bag (the same path as ``tactile-sl replay``) and returns per-frame and per-bag
+figures.  ``evaluate_touch_bag`` runs it with the touch stage and returns the touch figures
+of every frame (definitions in :mod:`~tactile_sl_decoder.tooling.e2e_metrics` and
 :mod:`~tactile_sl_decoder.tooling.touch_metrics`).
 """
 from __future__ import annotations
@@ -13,7 +13,10 @@ from typing import Any, Callable, TextIO
 
 import numpy as np
 
+from tactile_sl_common.images import to_gray
+from tactile_sl_decoder.frames import bag_frames, count_bag_frames
 from tactile_sl_decoder.glyphs import PipelineInputError
+from tactile_sl_decoder.sensor_step import SensorOutputs, SensorStep
 from tactile_sl_decoder.tooling.e2e_metrics import (
     BagMetrics,
     FrameMetrics,
@@ -28,6 +31,7 @@ from tactile_sl_decoder.tooling.touch_metrics import (
     compare_frame,
     read_truths,
 )
+from tactile_sl_decoder.touch.stage import TouchParams
 
 
 def flip_labels_hook(rate: float, symbols: int, seed: int = 0) -> Callable[[Any, Any], None]:
@@ -60,13 +64,12 @@ def evaluate_bag(path: str | Path, pipeline: Any, namespace: str = "/tactile",
     (:data:`~tactile_sl_decoder.tooling.evaluation.FRAME_INPUT_ERRORS`), each passed to
     ``on_skip(stamp_ns, why)`` (without it, the error is raised).
     """
-    from tactile_sl_decoder.frames import bag_frames, count_bag_frames
-
     pitch = float(getattr(pipeline.pattern, "pitch_m", 0.0) or 0.0)
     tol = match_tol_m if match_tol_m is not None else (0.5 * pitch if pitch > 0 else 2.5e-4)
     total = count_bag_frames(path, namespace)
     frames: list[FrameMetrics] = []
-    pipeline.forget_frames()       # a bag is a stream of its own: nothing from the last one
+    step = SensorStep(pipeline)    # points only
+    step.forget_frames()           # a bag is a stream of its own: nothing from the last one
     for i, frame in enumerate(bag_frames(path, namespace)):
         if max_frames and i >= max_frames:
             break
@@ -74,9 +77,10 @@ def evaluate_bag(path: str | Path, pipeline: Any, namespace: str = "/tactile",
             progress_bar(progress, i + 1, total, Path(path).name)
         if frame.ground_truth is None:
             continue
-        result = _process(pipeline, frame, on_skip, label_hook=label_hook)
-        if result is None:
+        out = _process(step, frame, on_skip, label_hook=label_hook)
+        if out is None:
             continue
+        result = out.stereo
         fm = frame_metrics(result.points, frame.ground_truth, tol, frame.stamp_ns)
         fm.timings_ms = dict(result.timings_ms)
         frames.append(fm)
@@ -97,19 +101,12 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
     ``slip`` (the slip estimate's part of it).  A frame with unusable input goes to
     ``on_skip`` as in :func:`evaluate_bag`.
     """
-    from tactile_sl_decoder.frames import bag_frames, count_bag_frames
-    from tactile_sl_decoder.touch.reference import ReferenceError
-    from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
-
     truths = {} if untouched else read_truths(path, namespace)
-    pattern = pipeline.pattern
-    stage = TouchStage(sensor, pattern.array.shape, pattern.pitch_m,
-                       bool(pipeline.params.decode.mirrored),
-                       TouchParams(reference_frames=reference_frames))
+    step = SensorStep(pipeline, sensor, TouchParams(reference_frames=reference_frames))
     name = Path(path).stem
     total = count_bag_frames(path, namespace)
     out: list[TouchFrameMetrics] = []
-    pipeline.forget_frames()       # a bag is a stream of its own: nothing from the last one
+    step.forget_frames()           # a bag is a stream of its own: nothing from the last one
     for i, frame in enumerate(bag_frames(path, namespace, ground_truth=False)):
         if max_frames and i >= max_frames:
             break
@@ -118,15 +115,11 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
         truth = truths.get(frame.stamp_ns)
         if truth is None and not untouched:
             continue
-        result = _process(pipeline, frame, on_skip)
-        if result is None:
+        was_ready = step.touch_ready
+        outputs = _process(step, frame, on_skip)
+        if outputs is None:
             continue
-        was_ready = stage.ready
-        try:
-            touch = stage.update(result.points)
-        except ReferenceError:
-            stage.tare()
-            touch = None
+        result, touch = outputs.stereo, outputs.touch.result
         if not was_ready:
             continue                       # a reference frame (or the reference failed)
         m = compare_frame(touch, truth, name, frame.stamp_ns)
@@ -140,16 +133,14 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
     return out
 
 
-def _process(pipeline: Any, frame: Any, on_skip: SkipCallback | None,
-             label_hook: Callable | None = None) -> Any:
-    """The pipeline's result for a bag frame, or None (after ``on_skip``) if its input is bad."""
-    from tactile_sl_camera.images import to_gray
-
+def _process(step: SensorStep, frame: Any, on_skip: SkipCallback | None,
+             label_hook: Callable | None = None) -> SensorOutputs | None:
+    """The step's outputs for a bag frame, or None (after ``on_skip``) if its input is bad."""
     try:
         if frame.left_info is None or frame.right_info is None:
             raise PipelineInputError("no camera_info for this frame")
-        return pipeline.process(to_gray(frame.left_image), to_gray(frame.right_image),
-                                frame.left_info, frame.right_info, label_hook=label_hook)
+        return step.process(to_gray(frame.left_image), to_gray(frame.right_image),
+                            frame.left_info, frame.right_info, label_hook=label_hook)
     except FRAME_INPUT_ERRORS as exc:
         if on_skip is None:
             raise

@@ -23,7 +23,7 @@ from typing import Any, Iterable, TextIO
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_camera.clouds import cloud_to_arrays
+from tactile_sl_common.clouds import cloud_to_arrays
 
 
 class _Rates:

@@ -29,11 +29,14 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_camera.camera_info import CameraInfoError
-from tactile_sl_camera.images import ImageFormatError
+from tactile_sl_common.camera_info import CameraInfoError, calibration_from_msg, stereo_baseline
+from tactile_sl_common.clouds import cloud_to_arrays
+from tactile_sl_common.images import ImageFormatError, to_gray
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.extract.extraction import ExtractionParams, extract_symbols
+from tactile_sl_decoder.frames import bag_frames, count_bag_frames
 from tactile_sl_decoder.glyphs import PipelineInputError
+from tactile_sl_decoder.pipeline import check_image
 
 
 @dataclass
@@ -80,8 +83,6 @@ class ImageSymbolMetrics:
 
 def project_truth(xyz: np.ndarray, left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
     """Raw pixel positions (N, 2) of 3-D points (left optical frame) in both cameras."""
-    from tactile_sl_camera.camera_info import stereo_baseline
-
     xyz = np.asarray(xyz, np.float64).reshape(-1, 3)
     if len(xyz) == 0:
         return np.zeros((0, 2)), np.zeros((0, 2))
@@ -158,10 +159,6 @@ def frame_input(frame: Any) -> tuple[Any, Any, tuple[np.ndarray, np.ndarray]]:
     Raises one of :data:`FRAME_INPUT_ERRORS` for an image the project cannot read (mono16,
     yuv422, ...), one whose size is not its CameraInfo's, or a missing or bad CameraInfo.
     """
-    from tactile_sl_camera.camera_info import calibration_from_msg
-    from tactile_sl_camera.images import to_gray
-    from tactile_sl_decoder.pipeline import check_image
-
     if frame.left_info is None or frame.right_info is None:
         raise CameraInfoError("no camera_info for this frame")
     left = calibration_from_msg(frame.left_info, "left CameraInfo")
@@ -183,9 +180,6 @@ def evaluate_symbols_bag(path: str | Path, values: np.ndarray, classifier: Any,
     CameraInfo, calibration) is passed to ``on_skip(stamp_ns, why)`` and left out; without
     ``on_skip`` the error is raised (see :data:`FRAME_INPUT_ERRORS`).
     """
-    from tactile_sl_camera.clouds import cloud_to_arrays
-    from tactile_sl_decoder.frames import bag_frames, count_bag_frames
-
     scene = Path(path).stem
     total = count_bag_frames(path, namespace)
     rows: list[ImageSymbolMetrics] = []

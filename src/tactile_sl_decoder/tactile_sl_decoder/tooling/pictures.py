@@ -8,9 +8,10 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import cv2
 import numpy as np
 
-from tactile_sl_camera.clouds import cloud_to_arrays
+from tactile_sl_common.clouds import cloud_to_arrays
 
 # ---------------------------------------------------------------------- camera images, clouds
 
@@ -26,8 +27,6 @@ def render_overlay(gray: np.ndarray, glyphs: Any, label_every: int = 4) -> np.nd
     filled dot, undecoded ones a ring; every cell whose row and column are multiples of
     ``label_every`` is written as ``row,col``.
     """
-    import cv2
-
     img = cv2.cvtColor(np.ascontiguousarray(gray, np.uint8), cv2.COLOR_GRAY2BGR)
     u = np.asarray(glyphs.u, np.float64)
     v = np.asarray(glyphs.v, np.float64)
@@ -51,8 +50,6 @@ def render_cloud(points: np.ndarray | Any, size: tuple[int, int] = (640, 480)) -
     distance to the cloud's least-squares plane: red is pressed towards the cameras, blue
     away; the range is written in the corner, in millimetres.
     """
-    import cv2
-
     pts = points if isinstance(points, np.ndarray) else cloud_to_arrays(points)
     w, h = size
     img = np.full((h, w, 3), 255, np.uint8)
@@ -101,8 +98,6 @@ class _Plot:
 
     def __init__(self, extent_mm: tuple[float, float, float, float], title: str,
                  plot_px: int = 560) -> None:
-        import cv2
-
         self.cv2 = cv2
         x0, x1, y0, y1 = extent_mm
         self.extent = extent_mm
@@ -172,8 +167,6 @@ def _ceiling(top: float) -> float:
 
 
 def _colours(values: np.ndarray, vmax: float, colormap: int) -> np.ndarray:
-    import cv2
-
     t = np.clip(np.nan_to_num(values / vmax), 0.0, 1.0)
     return cv2.applyColorMap((255 * t).astype(np.uint8).reshape(-1, 1), colormap)[:, 0]
 
@@ -186,8 +179,6 @@ def render_pressure(field_points: np.ndarray, pitch: float, title: str = "") -> 
     max(0, -fz) / pitch^2.  Arrows: the tangential force (fx, fy) of every other cell
     where it exceeds 5 % of the largest one; the cross is the pressure-weighted centroid.
     """
-    import cv2
-
     rest = np.column_stack([field_points["x"] - field_points["dx"],
                             field_points["y"] - field_points["dy"]]).astype(np.float64) * 1e3
     fz = np.asarray(field_points["fz"], np.float64)
@@ -237,8 +228,6 @@ def render_depth(depth: np.ndarray, x0: float, y0: float, resolution: float,
     Pixel (i, j) of ``depth`` lies at (x0 + j res, y0 + i res) in the pad frame (the
     ``depth`` topic's grid, docs/touch.md).
     """
-    import cv2
-
     h, w = depth.shape
     half = resolution / 2
     x_lo, x_hi, y_lo, y_hi = (1e3 * v for v in (x0 - half, x0 + (w - 1) * resolution + half,

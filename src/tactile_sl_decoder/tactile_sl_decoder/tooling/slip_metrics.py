@@ -3,7 +3,7 @@
 Tooling for ``tools/bench_touch.py`` and ``tactile-sl evaluate``; the touch stage never
 imports it.  One frame pairs the stage's
 :class:`~tactile_sl_decoder.touch.slip.SlipEstimate` with the truth's
-:class:`~tactile_sl_camera.sim.friction.ContactSlip` (from ``ground_truth/slip``), both
+:class:`~tactile_sl_sim.friction.ContactSlip` (from ``ground_truth/slip``), both
 carried by a :class:`~tactile_sl_decoder.tooling.touch_metrics.TouchFrameMetrics`.
 The acceptance of issue 24 (docs/slip.md, "Accuracy"):
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.pattern.shapes import glyph
 
@@ -164,8 +165,6 @@ def render_at(centres: np.ndarray, values: np.ndarray, pitch_px: float,
     Each sample is tested against its nearest centre's glyph, so overlapping glyphs meet
     along the line between them and stay connected.
     """
-    from scipy.spatial import cKDTree
-
     h, w = shape
     s = supersample
     gx, gy = _subpixel_grid(shape, s)

@@ -4,7 +4,7 @@ Tooling for ``tactile-sl evaluate``, ``tools/bench_touch.py`` and the demo; the 
 never imports it.  Definitions of every figure and of the acceptance limits (issue 10):
 ``docs/touch_evaluation.md``.  One frame's estimate is a
 :class:`~tactile_sl_decoder.touch.stage.TouchResult`, its truth a
-:class:`~tactile_sl_camera.sim.loads.TouchTruth` rebuilt from the bag's
+:class:`~tactile_sl_sim.loads.TouchTruth` rebuilt from the bag's
 ``ground_truth/{wrench,field,contact}`` (or an untouched pad, for control bags without them).
 """
 from __future__ import annotations
@@ -16,6 +16,11 @@ from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
+
+from tactile_sl_common.bag_io import BagReader, stamp_to_ns
+from tactile_sl_decoder.touch.sensor import SensorConfig, default_sensor_path, load_sensor
+from tactile_sl_sim.loads import touch_truth_from_messages
+from tactile_sl_sim.scenes import SceneError, load_scenes
 
 NAN = float("nan")
 
@@ -263,8 +268,6 @@ def compare_frame(result: Any | None, truth: Any | None, bag: str = "", stamp_ns
 
 def has_touch_truth(path: str | Path, namespace: str = "/tactile") -> bool:
     """The bag carries ``ground_truth/wrench`` (a touch scene of the simulator)."""
-    from tactile_sl_camera.bag_io import BagReader
-
     return f"{namespace.rstrip('/')}/ground_truth/wrench" in BagReader(path).topics
 
 
@@ -273,9 +276,6 @@ def read_truths(path: str | Path, namespace: str = "/tactile") -> dict[int, Any]
 
     With ``ground_truth/slip`` (scenes with friction) the truth carries the slip state.
     """
-    from tactile_sl_camera.bag_io import BagReader, stamp_to_ns
-    from tactile_sl_camera.sim.loads import touch_truth_from_messages
-
     ns = namespace.rstrip("/")
     names = {f"{ns}/ground_truth/{k}": k for k in ("wrench", "field", "contact", "slip")}
     reader = BagReader(path)
@@ -295,9 +295,6 @@ def scene_sensor(bag: str | Path) -> tuple[Any, str] | None:
     after its scene, so a ``*scenes.yaml`` beside the bag with a scene of the bag's name
     gives it.  Returns (SensorConfig, description) or None.
     """
-    from tactile_sl_camera.sim.scenes import SceneError, load_scenes
-    from tactile_sl_decoder.touch.sensor import SensorConfig
-
     p = Path(bag)
     for scenes in sorted(p.parent.glob("*scenes.yaml")):
         try:
@@ -312,8 +309,6 @@ def scene_sensor(bag: str | Path) -> tuple[Any, str] | None:
 
 def resolve_sensor(bag: str | Path, sensor_path: str | Path | None) -> tuple[Any, str]:
     """(SensorConfig, where it came from): ``--sensor``, else the bag's scene, else shipped."""
-    from tactile_sl_decoder.touch.sensor import default_sensor_path, load_sensor
-
     if sensor_path:
         return load_sensor(sensor_path), f"--sensor {sensor_path}"
     found = scene_sensor(bag)

@@ -19,6 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
+from tactile_sl_common.bag_io import BagError, BagReader, BagWriter, restamp_cdr
+
 IMAGE_TOPICS_SUFFIXES = ("/image_raw", "/camera_info")
 
 
@@ -32,8 +34,6 @@ def write_phase_bag(source: str | Path, out: str | Path, untouched: Sequence[int
     pressed one through ``pressed``.  Every frame gets a new stamp, ``period_s`` apart from
     the first frame's stamp (log time = stamp).  Returns the number of frames written.
     """
-    from tactile_sl_camera.bag_io import BagError, BagReader, BagWriter, restamp_cdr
-
     reader = BagReader(source)
     frames: dict[int, list] = {}
     for raw in reader.raw_messages():

@@ -1,6 +1,6 @@
 """Training data from the simulator and training of the glyph classifier (torch, CPU).
 
-Data: stereo frames rendered by :mod:`tactile_sl_camera.sim` under random indenters, depths,
+Data: stereo frames rendered by :mod:`tactile_sl_sim` under random indenters, depths,
 positions, shear and nuisances (blur, noise, vignetting, uneven light, gamma, exposure,
 shadows), most of them also with the nuisances of real sensors (:func:`sensor_nuisances`:
 an object seen through the pad, MJPEG, defocus, motion blur, unequal exposure, a damaged
@@ -27,9 +27,20 @@ from typing import Any, Callable, TextIO
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.classify.classifier import ARCH, ARCH_DESCRIPTIONS, FORMAT, FORMAT_VERSION
+from tactile_sl_decoder.classify.classifier import (
+    ARCH,
+    ARCH_DESCRIPTIONS,
+    FORMAT,
+    FORMAT_VERSION,
+    Classifier,
+)
 from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.extract.extraction import ExtractionParams, extract_symbols
+from tactile_sl_decoder.pattern.shapes import glyph
+from tactile_sl_sim.artwork import load_artwork
+from tactile_sl_sim.contact import Contact
+from tactile_sl_sim.optics import RigParams, SimulatedCameraPair
+from tactile_sl_sim.render import Nuisances, Renderer
 
 DEFAULT_PRIMITIVES = ("line", "circle", "triangle")
 TRAIN_KINDS = ("sphere", "cylinder")
@@ -103,8 +114,6 @@ def artwork_values(art: Any, primitives: tuple[str, ...] | list[str]) -> np.ndar
     whatever the state of the pattern file; each cell's ink is compared with every
     primitive's shape (pad-plane pitch units) and the best normalised match wins.
     """
-    from tactile_sl_decoder.pattern.shapes import glyph
-
     size = int(round(art.pitch_px))
     g = (np.arange(size) - (size - 1) / 2.0) / art.pitch_px
     gx, gy = np.meshgrid(g, g)
@@ -139,8 +148,6 @@ def random_scene(rng: np.random.Generator, kinds: tuple[str, ...]
     frames also those of real sensors (:func:`sensor_nuisances`) and a spacing drawn from
     ``TRAIN_SPACINGS_PX`` (else the sensor's 18 px).
     """
-    from tactile_sl_camera.sim import Contact, Nuisances
-
     contacts = []
     for _ in range(int(rng.choice([0, 1, 1, 1, 2]))):
         kind = str(rng.choice(kinds))
@@ -223,9 +230,6 @@ def render_dataset(frames: int, seed: int, kinds: tuple[str, ...], values: np.nd
                    artwork: str | None = None, params: ExtractionParams | None = None,
                    progress: Callable[[int, str], None] | None = None) -> PatchSet:
     """Patches labelled from ``frames`` simulated stereo frames (both cameras)."""
-    from tactile_sl_camera.sim import Renderer, load_artwork
-    from tactile_sl_camera.sim.optics import RigParams, SimulatedCameraPair
-
     art = load_artwork(artwork)
     if values is None:
         values = artwork_values(art, DEFAULT_PRIMITIVES)
@@ -257,6 +261,7 @@ def render_dataset(frames: int, seed: int, kinds: tuple[str, ...], values: np.nd
 
 def augment(x: Any, gen: Any) -> Any:
     """Random geometric and photometric jitter of standardised-to-be patches (N,1,18,18)."""
+    # torch (1-2 s to import) here and below: only training needs it, the datasets do not
     import torch
     import torch.nn.functional as F
 
@@ -309,10 +314,9 @@ def train(train_set: PatchSet, val_set: PatchSet, classes: int, primitives: list
           lr: float = 3e-3, progress_stream: TextIO | None = None,
           meta: dict[str, Any] | None = None, arch: str = ARCH) -> TrainResult:
     """Train the net ``arch`` with Adam and a one-cycle schedule; weights and held-out figures."""
-    import torch
+    import torch  # only training needs torch (see augment)
 
-    from tactile_sl_decoder.classify.classifier import Classifier
-    from tactile_sl_decoder.classify.model import make_model, standardise
+    from tactile_sl_decoder.classify.model import make_model, standardise  # torch's nets
 
     start = time.monotonic()
     torch.manual_seed(seed)
@@ -393,7 +397,7 @@ def model_card(result: TrainResult, data_note: str, data_seconds: float,
 
 def save_blob(blob: dict[str, Any], path: str | Path) -> None:
     """Write weights with torch.save (read back with ``weights_only=True``)."""
-    import torch
+    import torch  # only training needs torch (see augment)
 
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     torch.save(blob, path)

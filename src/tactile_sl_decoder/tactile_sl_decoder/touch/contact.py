@@ -16,29 +16,41 @@ from scipy import ndimage
 from tactile_sl_decoder.jit import helper, kernel
 from tactile_sl_decoder.touch.support import SupportRegions, support_regions
 
+from tactile_sl_common.settings import SettingsTable
+
 
 @dataclass
 class ContactParams:
     """Thresholds of the contact state."""
 
-    force_on: float = 0.010    # N: in_contact turns on above this normal force ...
-    force_off: float = 0.005   # N: ... and off below this one (hysteresis)
-    area_fraction: float = 0.0   # a cell counts into the area above this x its region's
-                                 # peak; 0 = the traction solver's choice for the elastomer
-    core_fraction: float = 0.3   # a region's centroid from its cells above this x its peak
-    displacement_noise: float = 3e-6   # m per axis: weighs the two centroid estimates, and
-                                       # the noise of the area's support and of max_depth
-    map_centroid_sigma: float = 6e-5   # m: uncertainty of the map's centroid (pitch / 8)
-    depth_upsample: int = 4    # depth-map pixels per cell pitch
-    support_sigmas: float = 2.0   # a cell is in the area's support above this x its noise
-    support_edge_snr: float = 5.0   # ... and a region's area is taken from the support when
-                                    # its edge presses by this x the noise (else the map's)
+    force_on: float = 0.010
+    """N: in_contact turns on above this normal force"""
+    force_off: float = 0.005
+    """N: in_contact turns off below this normal force (hysteresis; <= contact_force_on)"""
+    area_fraction: float = 0.0
+    """A cell counts into the area above this x its region's peak; 0 = the traction
+    solver's choice for the elastomer."""
+    core_fraction: float = 0.3
+    """A region's centroid from its cells above this x its peak."""
+    displacement_noise: float = 3e-6
+    """m per axis: weighs the two centroid estimates; the noise of the area's support and
+    of max_depth."""
+    map_centroid_sigma: float = 6e-5
+    """m: uncertainty of the map's centroid (pitch / 8)."""
+    depth_upsample: int = 4
+    """Depth-map pixels per cell pitch."""
+    support_sigmas: float = 2.0
+    """A cell is in the area's support above this x its noise."""
+    support_edge_snr: float = 5.0
+    """A region's area is taken from the support when its edge presses by this x the noise
+    (else from the map's threshold)."""
 
     def validate(self) -> "ContactParams":
-        """Raise ValueError for values outside their ranges."""
-        if not 0 < self.force_off <= self.force_on:
-            raise ValueError(f"need 0 < contact_force_off <= contact_force_on, got "
-                             f"{self.force_off} and {self.force_on}")
+        """Raise ValueError for values outside their ranges (:data:`CONTACT_SETTINGS`)."""
+        CONTACT_SETTINGS.check(self, "contact_")
+        if self.force_off > self.force_on:
+            raise ValueError(f"contact_force_off ({self.force_off}) must not exceed "
+                             f"contact_force_on ({self.force_on})")
         if not 0 <= self.core_fraction < 1:
             raise ValueError(f"core_fraction must be in [0, 1), got {self.core_fraction}")
         if self.displacement_noise <= 0 or self.map_centroid_sigma <= 0:
@@ -50,6 +62,11 @@ class ContactParams:
         if not (self.support_sigmas > 0 and self.support_edge_snr > 0):
             raise ValueError("support_sigmas and support_edge_snr must be > 0")
         return self
+
+
+CONTACT_SETTINGS = SettingsTable(ContactParams, fields=("force_on", "force_off"),
+                                 ranges={"force_on": (1e-4, 100.0), "force_off": (1e-4, 100.0)})
+"""The decoder node's live ``contact_force_on`` and ``contact_force_off`` parameters."""
 
 
 @dataclass

@@ -23,9 +23,10 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from tactile_sl_camera.elasticity import Elastomer
+from tactile_sl_common.elasticity import Elastomer
+from tactile_sl_decoder.touch.driver import TouchDriver
 from tactile_sl_decoder.touch.sensor import SensorConfig, read_yaml_file
-from tactile_sl_decoder.touch.stage import TouchParams, TouchStage
+from tactile_sl_decoder.touch.stage import TouchParams
 from tactile_sl_decoder.touch.traction import TractionParams
 
 MIN_LOADS = 2
@@ -117,16 +118,24 @@ def load_loads_file(path: str | os.PathLike) -> list[KnownLoad]:
 def _estimates(frames: list[np.ndarray], loads: list[KnownLoad], sensor: SensorConfig,
                shape: tuple[int, int], pitch: float, mirrored: bool,
                reference_frames: int) -> tuple[np.ndarray, float]:
-    """Estimated normal forces of the loaded frames, and the mean relative residual."""
+    """Estimated normal forces of the loaded frames, and the mean relative residual.
+
+    An unusable reference (:class:`~tactile_sl_decoder.touch.reference.ReferenceError`) ends
+    the fit: the recording's first frames must show the untouched pad.
+    """
     # forces only: the contact area's constrained inversion is not prepared (0.3-0.5 s each)
-    stage = TouchStage(sensor, shape, pitch, mirrored,
-                       TouchParams(reference_frames=reference_frames,
-                                   traction=TractionParams(support_weight=0.0)))
+    driver = TouchDriver(sensor, shape, pitch, mirrored,
+                         TouchParams(reference_frames=reference_frames,
+                                     traction=TractionParams(support_weight=0.0)))
+    stage = driver.stage
     wanted = {ld.frame: k for k, ld in enumerate(loads)}
     q = np.full(len(loads), np.nan)
     residuals = []
     for i, points in enumerate(frames):
-        out = stage.update(points)
+        touch = driver.frame(points)
+        if touch.reference_failed is not None:
+            raise touch.reference_failed
+        out = touch.result
         if i < reference_frames and i in wanted:
             raise ForceCalibrationError(f"frame {i} carries a load but is one of the "
                                         f"{reference_frames} untouched reference frame(s)")

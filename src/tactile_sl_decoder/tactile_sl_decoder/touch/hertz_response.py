@@ -7,7 +7,7 @@ traction have that shape, and the response of an axisymmetric profile depends on
 distance r to its centre and on the angle theta only through cos theta, cos 2 theta and
 sin 2 theta, so four radial functions per radius describe it (pad frame, G the shear
 modulus; derived from the Fourier-domain compliance of
-:func:`tactile_sl_camera.elasticity.fourier_compliance` by the angular integrals of
+:func:`tactile_sl_common.elasticity.fourier_compliance` by the angular integrals of
 Gradshteyn-Ryzhik 8.411.1):
 
 * normal traction q_z = w_s:      u_r = C_s(r),  u_z = D_s(r);
@@ -17,7 +17,7 @@ Gradshteyn-Ryzhik 8.411.1):
 with A = 1/(2 pi G) int W_s(k) (L + T)/2 J0(k r) dk, B = ... (L - T)/2 J2, C = ... Q J1,
 D = ... Z J0, where W_s(k) = 2 pi s^2 (sin t - t cos t) / t^3 (t = k s) is the Hankel
 transform of w_s and L, T, Z, Q the compliances of
-:func:`tactile_sl_camera.elasticity.layer_compliance`.
+:func:`tactile_sl_common.elasticity.layer_compliance`.
 
 * **Half-space** (L = Z = 1 - nu, T = 1, Q = (1 - 2 nu)/2): A = (2 - nu)/2 H0,
   B = -nu/2 H2, C = (1 - 2 nu)/2 H1, D = (1 - nu) H0, times s / (2 pi G), with the closed
@@ -32,7 +32,7 @@ transform of w_s and L, T, Z, Q the compliances of
   Gauss-Legendre quadrature (as the elasticity module's layer kernel).
 
 The tables agree with the cell-kernel convolution the simulator renders with
-(:func:`tactile_sl_camera.elasticity.surface_displacement`) to about 1e-3 (tests).
+(:func:`tactile_sl_common.elasticity.surface_displacement`) to about 1e-3 (tests).
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special
 
-from tactile_sl_camera.elasticity import HALF_SPACE_KH, Elastomer, layer_compliance
+from tactile_sl_common.elasticity import HALF_SPACE_KH, Elastomer, layer_compliance
 
 FUNCTIONS = ("A", "B", "C", "D")
 """The four radial functions of a table, in order (see the module docstring)."""

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from tactile_sl_camera.clouds import cloud_fields, pack_field
+from tactile_sl_common.clouds import cloud_fields, pack_field
 from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_NO_CONTACT, SLIP_PARTIAL, SLIP_STICK
 from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.reference import PadPose

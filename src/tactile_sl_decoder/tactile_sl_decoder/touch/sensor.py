@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from tactile_sl_camera.elasticity import Elastomer
+from tactile_sl_common.elasticity import Elastomer
 
 FORMAT_VERSION = 1
 TOP_KEYS = ("tactile_sl_sensor", "elastomer", "pad_frame")

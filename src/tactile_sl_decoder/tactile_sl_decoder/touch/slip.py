@@ -52,7 +52,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from tactile_sl_camera.elasticity import Elastomer
+from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_NO_CONTACT, SLIP_PARTIAL, SLIP_STICK
 from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.hertz_response import HertzResponse, hertz_response

@@ -14,7 +14,9 @@ the preparation runs in a worker thread (LAPACK releases the GIL) while frames k
 instead of the camera stream stalling for a second at start.  Frames that arrive meanwhile
 wait in a bounded queue (``TouchParams.max_pending_frames``) and get their outputs, in
 order, as soon as the reference is ready (:meth:`TouchStage.drain`): no decoded frame after
-the reference frames goes without touch outputs, it only comes late.  A tare whose new
+the reference frames goes without touch outputs, it only comes late.  The inversion is kept
+on disk (:mod:`.solver_cache`): when a restarted node's reference has the same cells as one
+before, it is read back in ~0.1 s.  A tare whose new
 reference holds the same cells as the last one reuses the last inversion (it depends on the
 cells only, not on where they are), so it is ready at the frame that completes it.
 """
@@ -29,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from tactile_sl_camera.elasticity import check_layer_resolved
+from tactile_sl_common.elasticity import check_layer_resolved
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.touch.contact import (
     ContactParams,
     ContactState,
@@ -45,6 +48,7 @@ from tactile_sl_decoder.touch.reference import (
 )
 from tactile_sl_decoder.touch.sensor import SensorConfig
 from tactile_sl_decoder.touch.slip import SlipEstimate, SlipEstimator, SlipParams
+from tactile_sl_decoder.touch.solver_cache import SolverCache
 from tactile_sl_decoder.touch.traction import TractionParams, TractionSolver
 
 
@@ -53,28 +57,40 @@ class TouchParams:
     """Settings of the touch stage (the decoder node exposes them as parameters)."""
 
     reference_frames: int = 1
+    """Decoded frames averaged into the untouched reference (at start and after each
+    tare)."""
     traction: TractionParams = field(default_factory=TractionParams)
     contact: ContactParams = field(default_factory=ContactParams)
     slip: SlipParams = field(default_factory=SlipParams)
-    tare_max_depth: float = 5e-5   # m: a tare is refused above this indentation ...
-                                   # ... or while in_contact
-    max_pending_frames: int = 300  # frames kept while a reference is prepared in the
-                                   # background (then the oldest are dropped): ~5-10 s
+    tare_max_depth: float = 5e-5
+    """m: a tare is refused while the pad is pressed in deeper than this (or in contact)"""
+    max_pending_frames: int = 300
+    """Frames kept while a new reference is prepared in the background (about 1-2 s at
+    start, or after a tare that changes the reference's cells); they get their touch
+    outputs, late, once it is ready. Beyond this many the oldest are dropped (counted in
+    diagnostics)."""
+    solver_cache: bool = True
+    """Keep each reference's inversion on disk and read it back when a reference of the
+    same cells on the same pad comes again (a restart: ~0.1 s instead of ~1-2 s)."""
+    solver_cache_dir: str = ""
+    """Directory of the stored inversions; empty = $XDG_CACHE_HOME/tactile_sl/traction
+    (~/.cache/tactile_sl/traction). At most 8 are kept, ~20-40 MB each."""
 
     def validate(self) -> "TouchParams":
-        """Raise ValueError for values outside their ranges."""
-        if not 1 <= self.reference_frames <= 1000:
-            raise ValueError(f"reference_frames must be in 1..1000, got "
-                             f"{self.reference_frames}")
-        if self.tare_max_depth <= 0:
-            raise ValueError(f"tare_max_depth must be > 0, got {self.tare_max_depth}")
-        if not 0 <= self.max_pending_frames <= 100000:
-            raise ValueError(f"max_pending_frames must be in 0..100000, got "
-                             f"{self.max_pending_frames}")
+        """Raise ValueError for values outside their ranges (:data:`TOUCH_SETTINGS`)."""
+        TOUCH_SETTINGS.check(self)
         self.traction.validate()
         self.contact.validate()
         self.slip.validate()
         return self
+
+
+TOUCH_SETTINGS = SettingsTable(
+    TouchParams, ranges={"reference_frames": (1, 1000), "tare_max_depth": (1e-7, 0.01),
+                         "max_pending_frames": (0, 100000)},
+    read_only=("reference_frames", "max_pending_frames", "solver_cache", "solver_cache_dir"))
+"""The decoder node's ``reference_frames``, ``tare_max_depth``, ``max_pending_frames`` and
+``solver_cache(_dir)``."""
 
 
 @dataclass
@@ -169,6 +185,8 @@ class TouchStage:
         self.last_solve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._index = np.full(self.shape[0] * self.shape[1], -1, np.int64)
         self._last_solver: TractionSolver | None = None
+        self.solver_cache = (SolverCache(self.params.solver_cache_dir or None)
+                             if self.params.solver_cache else None)
         all_rows, all_cols = np.divmod(np.arange(self.shape[0] * self.shape[1]), self.shape[1])
         # rest position of every cell: the reference's where it has one, else the nominal
         self._rest_table = nominal_positions(all_rows, all_cols, self.shape, self.pitch,
@@ -264,7 +282,7 @@ class TouchStage:
         rest = pose.to_pad(mean)
         if solver is None:
             solver = TractionSolver(self.sensor.elastomer, self.pitch, self.shape, cells,
-                                    self.params.traction, self.mirrored)
+                                    self.params.traction, self.mirrored, self.solver_cache)
         return cells, rest, pose, frames, nominal, solver
 
     def _reusable_solver(self, cells: np.ndarray) -> TractionSolver | None:

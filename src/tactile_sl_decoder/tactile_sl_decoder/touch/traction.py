@@ -3,7 +3,7 @@
 Forward model (pad frame): the displacement of reference cell i is
 u_i = sum_j G(r_i - r_j) f_j, where f_j (N) is the force the object exerts on cell j, spread
 uniformly over the cell, and G the surface Green's function of the elastomer
-(:func:`tactile_sl_camera.elasticity.cell_kernel`: Boussinesq-Cerruti for a half-space,
+(:func:`tactile_sl_common.elasticity.cell_kernel`: Boussinesq-Cerruti for a half-space,
 the bonded layer's Fourier-domain compliance for ``thickness > 0``).  Every reference cell
 carries three unknowns; the system is square and solved by Tikhonov regularisation,
 f = (G^T G + a s I)^-1 G^T u with s = mean(diag G^T G) (Hansen, Rank-Deficient and Discrete
@@ -43,13 +43,18 @@ convolution) before the products.
 """
 from __future__ import annotations
 
+import dataclasses
+import functools
+import sys
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-from tactile_sl_camera.elasticity import Elastomer, cell_kernel
+from tactile_sl_common.elasticity import Elastomer, cell_kernel
+from tactile_sl_decoder.touch import cholesky
 from tactile_sl_decoder.touch.cholesky import cho_factor_upper, cho_solve_upper
+from tactile_sl_decoder.touch.solver_cache import SolverCache, entry_key, source_digest
 
 
 @dataclass
@@ -82,6 +87,14 @@ class TractionParams:
 # Hertz discs of these radii (m) pushed through the forward model (see _area_fraction).
 AREA_FRACTIONS = (0.1, 0.15, 0.2, 0.25, 0.3, 0.35)
 TEST_RADII = (2e-3, 3e-3, 4e-3)
+_STORED = ("scale", "wrench_rows", "map_0", "map_1", "map_2", "area_fraction",
+           "support_rows", "support_inverse")
+
+
+@functools.cache
+def _code_digest() -> str:
+    """The source of the code an inversion comes from (part of its cache key)."""
+    return source_digest(sys.modules[__name__], cholesky)
 
 
 class TractionSolver:
@@ -89,7 +102,12 @@ class TractionSolver:
 
     def __init__(self, elastomer: Elastomer, pitch: float, shape: tuple[int, int],
                  cells: np.ndarray, params: TractionParams | None = None,
-                 mirrored: bool = False) -> None:
+                 mirrored: bool = False, cache: SolverCache | None = None) -> None:
+        """Prepare the inversion for ``cells``; ``cache``: read it from there, or store it.
+
+        An entry of the cache holds the very arrays computed here (:mod:`.solver_cache`),
+        so a solver read back gives the same bytes as one computed.
+        """
         self.params = (params or TractionParams()).validate()
         self.shape = (int(shape[0]), int(shape[1]))
         self.cells = np.asarray(cells, np.int64)          # flat indices row * cols + col
@@ -101,12 +119,35 @@ class TractionSolver:
         dc = self.cols[:, None] - self.cols[None, :] + self.shape[1] - 1
         # G[3i + a, 3j + b] = u_a at cell i per unit f_b on cell j
         g = kernel[dr, dc].transpose(0, 2, 1, 3).reshape(3 * n, 3 * n)
-        h = g.T @ g
-        self.scale = float(np.mean(np.diag(h)))
-        eye = self.scale * np.eye(3 * n)
+        self._g32 = g.astype(np.float32)      # forward model: fit residuals (calibration)
+        self._grid_index = np.full(self.shape, -1, np.int64)
+        self._grid_index[self.rows, self.cols] = np.arange(n)
+        self.last_support = np.zeros(n, bool)
         # Resultant: rows sum fx, fy, fz and the moments r x f about the pad origin (z = 0).
         x = (self.cols - (self.shape[1] - 1) / 2.0) * pitch * (-1.0 if mirrored else 1.0)
         y = (self.rows - (self.shape[0] - 1) / 2.0) * pitch
+        key = None
+        if cache is not None:
+            settings = {"elastomer": dataclasses.asdict(elastomer), "pitch": float(pitch),
+                        "shape": list(self.shape), "mirrored": bool(mirrored),
+                        "params": dataclasses.asdict(self.params)}
+            key = entry_key(kernel, self.cells, settings, _code_digest())
+            stored = cache.load(key, _STORED)
+            if stored is not None:
+                self._install(stored)
+                return
+        self._install(self._invert(g, x, y))
+        self.area_fraction = self._area_fraction(g, x, y, pitch)
+        if cache is not None and key is not None:
+            cache.store(key, self._stored())
+
+    def _invert(self, g: np.ndarray, x: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
+        """The regularised inverses: resultant rows, per-component map rows and, with
+        ``support_weight`` > 0, the constrained inversion's normal rows and inverse block."""
+        n = len(self.cells)
+        h = g.T @ g
+        scale = float(np.mean(np.diag(h)))
+        eye = scale * np.eye(3 * n)
         s: np.ndarray = np.zeros((6, n, 3))  # per point, then flattened to (6, 3n)
         s[0, :, 0] = s[1, :, 1] = s[2, :, 2] = 1.0
         s[3, :, 2] = y                     # Mx = sum y fz
@@ -116,23 +157,18 @@ class TractionSolver:
         # (the factorisations release the GIL: touch/cholesky.py; a node prepares this in a
         # worker thread while frames keep coming)
         fw = cho_factor_upper(h + self.params.wrench_weight * eye)
-        self._wrench_rows = cho_solve_upper(fw, s.T).T @ g.T
-        # standard deviation of (M_x, M_y) per metre of i.i.d. displacement noise
-        self.moment_noise = (float(np.linalg.norm(self._wrench_rows[3])),
-                             float(np.linalg.norm(self._wrench_rows[4])))
-        self._g32 = g.astype(np.float32)      # forward model: fit residuals (calibration)
+        wrench_rows = cho_solve_upper(fw, s.T).T @ g.T
         fm = cho_factor_upper(h + self.params.map_weight * eye)
         full = cho_solve_upper(fm, g.T)
         # One contiguous matrix per force component: the normal one finds the support, the
         # tangential ones are then needed only on its rows (the map is memory-bound).
-        self._map_rows = [np.ascontiguousarray(full[axis::3], dtype=np.float32)
-                          for axis in range(3)]
-        self._grid_index = np.full(self.shape, -1, np.int64)
-        self._grid_index[self.rows, self.cols] = np.arange(n)
-        self.last_support = np.zeros(n, bool)
-        self._support_rows: np.ndarray | None = None
-        self._near: tuple[np.ndarray, np.ndarray] | None = None   # last frame: u32, window
-        self.support_gain = np.zeros(n)
+        arrays: dict[str, np.ndarray] = {
+            f"map_{axis}": np.ascontiguousarray(full[axis::3], dtype=np.float32)
+            for axis in range(3)}
+        arrays.update(scale=np.array(scale), wrench_rows=wrench_rows,
+                      area_fraction=np.array(np.nan),
+                      support_rows=np.zeros((0, 0), np.float32),
+                      support_inverse=np.zeros((0, 0)))
         if self.params.support_weight > 0:
             fs = (fw if self.params.support_weight == self.params.wrench_weight
                   else cho_factor_upper(h + self.params.support_weight * eye))
@@ -140,11 +176,40 @@ class TractionSolver:
             unit[2::3] = np.eye(n)
             columns = cho_solve_upper(fs, unit)        # (Q^-1)[:, z]: Q symmetric
             # pressing p = -f_z = -(Q^-1 G^T u)_z, one row per cell
-            self._support_rows = np.ascontiguousarray(-(columns.T @ g.T), dtype=np.float32)
-            self._support_inverse = np.ascontiguousarray(columns[2::3])
-            # N of pressure per metre of i.i.d. displacement noise, per cell
-            self.support_gain = np.linalg.norm(self._support_rows.astype(np.float64), axis=1)
-        self.area_fraction = self._area_fraction(g, x, y, pitch)
+            arrays["support_rows"] = np.ascontiguousarray(-(columns.T @ g.T),
+                                                          dtype=np.float32)
+            arrays["support_inverse"] = np.ascontiguousarray(columns[2::3])
+        return arrays
+
+    def _install(self, arrays: dict[str, np.ndarray]) -> None:
+        self.scale = float(arrays["scale"])
+        self._wrench_rows = np.asarray(arrays["wrench_rows"], np.float64)
+        # standard deviation of (M_x, M_y) per metre of i.i.d. displacement noise
+        self.moment_noise = (float(np.linalg.norm(self._wrench_rows[3])),
+                             float(np.linalg.norm(self._wrench_rows[4])))
+        self._map_rows = [np.ascontiguousarray(arrays[f"map_{axis}"], dtype=np.float32)
+                          for axis in range(3)]
+        self._near: tuple[np.ndarray, np.ndarray] | None = None   # last frame: u32, window
+        # the constrained inversion for the contact area (empty arrays: none prepared)
+        support_rows = np.asarray(arrays["support_rows"], np.float32)
+        self._support_rows: np.ndarray | None = (
+            np.ascontiguousarray(support_rows) if support_rows.size else None)
+        self._support_inverse = np.ascontiguousarray(arrays["support_inverse"], np.float64)
+        # N of pressure per metre of i.i.d. displacement noise, per cell (from the stored
+        # float32 rows, so the same bytes whether computed or read back)
+        self.support_gain = (np.linalg.norm(support_rows.astype(np.float64), axis=1)
+                             if support_rows.size else np.zeros(len(self.cells)))
+        self.area_fraction = float(arrays["area_fraction"])
+
+    def _stored(self) -> dict[str, np.ndarray]:
+        arrays: dict[str, np.ndarray] = {f"map_{axis}": rows
+                                         for axis, rows in enumerate(self._map_rows)}
+        arrays.update(scale=np.array(self.scale), wrench_rows=self._wrench_rows,
+                      area_fraction=np.array(self.area_fraction),
+                      support_rows=(self._support_rows if self._support_rows is not None
+                                    else np.zeros((0, 0), np.float32)),
+                      support_inverse=self._support_inverse)
+        return arrays
 
     # ------------------------------------------------------------------ helpers
 

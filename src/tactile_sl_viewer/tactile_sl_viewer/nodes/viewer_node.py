@@ -14,7 +14,8 @@ Subscribes (relative names; only while a page is open, and ``linger`` seconds af
 and serves one page on ``http://host:port/`` (default 127.0.0.1:8080).  Every subscription
 is best effort with a short queue: the decoder's reliable publishers never wait for this
 node, and a callback only files the message by stamp (:mod:`tactile_sl_viewer.assembly`);
-converting and encoding happen when a page asks for the next frame (:mod:`.web`).
+converting and encoding happen when a page asks for the next frame
+(:mod:`tactile_sl_viewer.web`).
 Parameters: ``config/viewer.yaml``.
 """
 from __future__ import annotations
@@ -28,8 +29,9 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image, PointCloud2
 
-from tactile_sl_camera.nodes.parameters import LiveParameters
-from tactile_sl_camera.nodes.runner import run_node
+from tactile_sl_common.nodes.parameters import LiveParameters
+from tactile_sl_common.nodes.runner import run_node
+from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
 from tactile_sl_msgs.msg import Contact, SymbolArray
 from tactile_sl_viewer.assembly import FrameAssembler
 from tactile_sl_viewer.packets import PacketBuilder
@@ -44,8 +46,6 @@ except ImportError:
 
 def pad_geometry(pattern_file: str) -> PadGeometry:
     """Rows, columns and pitch of the printed pattern (the shipped one when empty)."""
-    from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
-
     pattern = load_pattern(pattern_file or default_pattern_path(), verify=False)
     rows, cols = pattern.array.shape
     return PadGeometry(int(rows), int(cols), float(pattern.pitch_m))

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Callable
 
+from ..bounds import code_bounds
 from ..constraints import Constraints
 from . import dfs, fill_and_test, linear, pyramid
 from .base import Budget, GenerationFailed, GenerationResult
@@ -81,8 +82,6 @@ def generate(name: str, constraints: Constraints, rows: int, cols: int, seed: in
     except KeyError:
         raise ValueError(f"unknown algorithm {name!r}; choose from {', '.join(GENERATORS)}") \
             from None
-    from ..bounds import code_bounds
-
     windows = constraints.window_count(rows, cols)
     upper = code_bounds(constraints).upper
     if windows > upper:

@@ -5,6 +5,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from itertools import combinations
+from math import comb
 from typing import Any, TextIO
 
 import numpy as np
@@ -189,7 +190,6 @@ class WindowIndex:
 
 
 def _ball_terms(cells: int, k: int, radius: int) -> int:
-    from math import comb
     return comb(cells, radius) * (k - 1) ** radius
 
 

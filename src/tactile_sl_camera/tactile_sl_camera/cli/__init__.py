@@ -1,1 +1,0 @@
-"""`tactile-sl` subcommands of the camera package (registered by tactile_sl_decoder.cli)."""

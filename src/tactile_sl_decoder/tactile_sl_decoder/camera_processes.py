@@ -1,0 +1,254 @@
+"""Each camera's images' half of a stereo frame in a process of its own (no rclpy).
+
+The pipeline's work per frame is many small numpy and Python steps that hold the
+interpreter lock: two threads decoding two images share one core's worth of it (two
+threads running two independent pipelines got 0.86x the throughput of one; two processes
+1.93x).  So a live node extracts, finds the k nearest neighbours of, rectifies and
+classifies each camera's glyphs in a worker process per camera, while the main process
+decodes, pairs, triangulates and runs the touch stage.  Each worker keeps its camera's
+label carry (the labels kept from its previous frame), exactly as the in-process pipeline
+keeps it per camera, so the results are the same bytes (test).
+
+Images go to a worker through shared memory and its glyphs come back pickled through shared
+memory too (about 0.3 MB a stereo pair in all; through a pipe, whose 64 kB buffer splits such
+a message into a handful of wake-ups on each side, the transfers cost ~5 ms a frame); the
+pipe carries only short messages.  Settings travel with every frame, so a live change
+applies to the next frame as in the process; the camera calibration is sent when it changes.
+Workers are started with ``spawn`` (a fork of a process with DDS threads is unsafe), take
+about a second to start, end when the pipe closes, and their errors come back as the
+frame's errors.
+"""
+from __future__ import annotations
+
+import multiprocessing
+import pickle
+import time
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from multiprocessing.shared_memory import SharedMemory
+from typing import Any
+
+import numpy as np
+
+from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry, label_glyphs
+from tactile_sl_decoder.classify.classifier import Classifier
+from tactile_sl_decoder.cpu_threads import set_cpu_threads
+from tactile_sl_decoder.decode.grid import GridParams
+from tactile_sl_decoder.decode.joint import glyph_neighbours
+from tactile_sl_decoder.extract.extraction import extract_symbols
+from tactile_sl_decoder.glyphs import Glyphs
+from tactile_sl_decoder.stereo.stereo import StereoRig
+
+RESULT_BYTES = 4 << 20
+"""Shared memory for one camera's pickled glyphs (~0.15 MB a frame; larger goes by pipe)."""
+
+
+@dataclass
+class CameraJob:
+    """What a worker needs besides the image's bytes (the settings in force)."""
+
+    shape: tuple[int, int]
+    extraction: Any                 # ExtractionParams or None (defaults)
+    grid: GridParams
+    carry: CarryParams | None       # None: no labels carried (and the carry forgotten)
+    threshold: float | None         # the classifier's confidence threshold in force
+    patches: bool = False           # send the glyphs' patches back too (symbols_decoded)
+
+
+@dataclass
+class Match:
+    """What the main process needs of a camera's match to its previous frame.
+
+    The ``source`` of a :class:`~tactile_sl_decoder.classify.carry.Carried` (its normalised
+    patches stay in the worker).
+    """
+
+    source: np.ndarray
+
+
+@dataclass
+class CameraResult:
+    """One camera's half of a frame, as a worker made it.
+
+    Its glyphs (labelled), how many kept a label, their match to the previous frame
+    (``LabelCarry.last``) and the extraction / k-NN / classification times.
+    """
+
+    glyphs: Glyphs
+    carried: int
+    match: Any
+    timings_ms: tuple[float, float, float]
+
+
+class _Buffers:
+    """The two shared-memory blocks of one camera: its image in, its glyphs out."""
+
+    def __init__(self) -> None:
+        self.blocks: dict[str, SharedMemory] = {}
+
+    def get(self, name: str) -> SharedMemory:
+        """The block ``name`` (attached on first use; a new name replaces a grown block)."""
+        if name not in self.blocks:     # the main process made it and unlinks it (spawned
+            self.blocks[name] = SharedMemory(name=name)   # workers share its resource tracker)
+        return self.blocks[name]
+
+    def close(self) -> None:
+        for block in self.blocks.values():
+            block.close()
+        self.blocks.clear()
+
+
+def _serve(conn: Connection, weights: str | None, threshold: float | None,
+           cpu_threads: int) -> None:
+    """The worker's loop: one camera's frames, in order, until the pipe closes."""
+    set_cpu_threads(cpu_threads)
+    classifier = Classifier.load(weights, threshold)
+    carry = LabelCarry(CarryParams())
+    camera: Any = None
+    buffers = _Buffers()
+    try:
+        while True:
+            try:
+                kind, payload = conn.recv()
+            except (EOFError, OSError, KeyboardInterrupt):
+                return
+            if kind == "stop":
+                return
+            if kind == "camera":
+                camera = payload
+            elif kind == "forget":
+                carry.reset()
+            else:
+                job, image_name, result_name = payload
+                conn.send(_answer(job, buffers.get(image_name), buffers.get(result_name),
+                                  camera, classifier, carry))
+    finally:
+        buffers.close()
+
+
+def _answer(job: CameraJob, image: SharedMemory, out: SharedMemory, camera: Any,
+            classifier: Classifier, carry: LabelCarry) -> tuple[str, Any]:
+    """Run one camera's half; its result pickled into ``out`` (its length sent), or why not."""
+    gray = np.ndarray(job.shape, np.uint8, buffer=_view(image))
+    try:
+        blob = pickle.dumps(_half(gray, job, camera, classifier, carry), protocol=5)
+    except Exception as exc:          # the frame's error, raised in the main process
+        return "error", exc
+    if len(blob) > out.size:
+        return "inline", blob             # larger than the block: through the pipe
+    _view(out)[:len(blob)] = blob
+    return "ok", len(blob)
+
+
+def _view(block: SharedMemory) -> memoryview:
+    assert block.buf is not None
+    return block.buf
+
+
+def _half(image: np.ndarray, job: CameraJob, camera: Any, classifier: Classifier,
+          carry: LabelCarry) -> CameraResult:
+    # ``image`` lies in shared memory the main process rewrites for the next frame: nothing
+    # computed here keeps a view of it (extraction copies what it keeps)
+    """Extract, find the k nearest neighbours, rectify, classify (the in-process worker's)."""
+    if job.threshold is not None:
+        classifier.threshold = job.threshold
+    gray = image
+    t0 = time.perf_counter()
+    g = Glyphs.from_detections(extract_symbols(gray, job.extraction), gray.shape)
+    t1 = time.perf_counter()
+    g.neighbours = glyph_neighbours(g, job.grid)
+    g.rectified = StereoRig.rectify(camera, np.column_stack([g.u, g.v]).astype(np.float64))
+    t2 = time.perf_counter()
+    match = None
+    if job.carry is None:
+        carry.reset()
+        carried = label_glyphs([g], [None], classifier.predict)
+    else:
+        carry.params = job.carry
+        carried = label_glyphs([g], [carry], classifier.predict)
+        if carry.last is not None:
+            match = Match(carry.last.source)
+    if not job.patches:
+        g.patches = None                    # a quarter of a megabyte less over the pipe
+    return CameraResult(g, carried, match,
+                        (1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (time.perf_counter() - t2)))
+
+
+class CameraProcesses:
+    """Two worker processes, one per camera; :meth:`run` gives both halves of a frame."""
+
+    def __init__(self, weights: str | None, threshold: float | None,
+                 cpu_threads: int = 1) -> None:
+        context = multiprocessing.get_context("spawn")
+        self._conns: list[Connection] = []
+        self._procs: list[Any] = []
+        for side in ("left", "right"):
+            mine, theirs = context.Pipe()
+            proc = context.Process(target=_serve, args=(theirs, weights, threshold,
+                                                        cpu_threads),
+                                   name=f"tactile-sl {side} camera", daemon=True)
+            proc.start()
+            theirs.close()
+            self._conns.append(mine)
+            self._procs.append(proc)
+        self._cameras: list[Any] = [None, None]
+        self._images: list[SharedMemory | None] = [None, None]
+        self._results = [SharedMemory(create=True, size=RESULT_BYTES) for _ in range(2)]
+
+    def run(self, images: tuple[np.ndarray, np.ndarray], cameras: tuple[Any, Any],
+            jobs: tuple[CameraJob, CameraJob]) -> tuple[CameraResult, CameraResult]:
+        """Both cameras' halves of one frame, computed side by side."""
+        for i, conn in enumerate(self._conns):
+            if cameras[i] is not self._cameras[i]:
+                conn.send(("camera", cameras[i]))
+                self._cameras[i] = cameras[i]
+            block = self._image_block(i, images[i].nbytes)
+            np.copyto(np.ndarray(images[i].shape, np.uint8, buffer=_view(block)), images[i])
+            conn.send(("frame", (jobs[i], block.name, self._results[i].name)))
+        replies = []
+        for conn, proc in zip(self._conns, self._procs):     # both, before raising
+            try:
+                replies.append(conn.recv())
+            except (EOFError, OSError):
+                raise RuntimeError(f"the {proc.name} worker process ended (exit code "
+                                   f"{proc.exitcode})") from None
+        out = []
+        for (status, value), result in zip(replies, self._results):
+            if status == "error":
+                raise value
+            out.append(pickle.loads(value if status == "inline" else _view(result)[:value]))
+        return out[0], out[1]
+
+    def _image_block(self, i: int, size: int) -> SharedMemory:
+        """Camera ``i``'s image block, made (again) when an image does not fit."""
+        block = self._images[i]
+        if block is None or block.size < size:
+            if block is not None:
+                block.close()
+                block.unlink()
+            block = self._images[i] = SharedMemory(create=True, size=size)
+        return block
+
+    def forget(self) -> None:
+        """Nothing carried to the next frame (each worker forgets its camera's labels)."""
+        for conn in self._conns:
+            conn.send(("forget", None))
+
+    def close(self) -> None:
+        """Stop the workers (they also end when this process does)."""
+        for conn in self._conns:
+            try:
+                conn.send(("stop", None))
+            except (OSError, ValueError):
+                pass
+            conn.close()
+        for proc in self._procs:
+            proc.join(timeout=2.0)
+            if proc.is_alive():
+                proc.terminate()
+        self._conns, self._procs = [], []
+        for block in [*self._images, *self._results]:
+            if block is not None:
+                block.close()
+                block.unlink()
+        self._images, self._results = [None, None], []

@@ -1,0 +1,52 @@
+"""Camera worker processes (camera_processes.py) give the in-process pipeline's bytes."""
+import pytest
+
+from tactile_sl_common.images import to_gray
+from tactile_sl_decoder.frames import bag_frames
+from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+
+from ros_harness import BAGS
+
+pytestmark = pytest.mark.slow
+
+
+def _job(gray):
+    from tactile_sl_decoder.camera_processes import CameraJob
+    from tactile_sl_decoder.decode.grid import GridParams
+
+    return CameraJob(gray.shape, None, GridParams(), None, None)
+
+
+def test_the_same_points_cells_and_carry_as_in_process():
+    frames = [(to_gray(f.left_image), to_gray(f.right_image), f.left_info, f.right_info)
+              for f in bag_frames(BAGS / "two_contacts.mcap")]
+    pattern = PatternSpec.load(None)
+    here = StereoPipeline(pattern, None, PipelineParams(threads=1))
+    there = StereoPipeline(pattern, None, PipelineParams(processes=True))
+    try:
+        for repeat in range(2):          # the second pass carries labels (and some cells)
+            for left, right, li, ri in frames:
+                a = here.process(left, right, li, ri)
+                b = there.process(left, right, li, ri)
+                assert a.points.tobytes() == b.points.tobytes()
+                assert (a.carried, a.tracked) == (b.carried, b.tracked)
+                for ga, gb in ((a.left, b.left), (a.right, b.right)):
+                    assert (ga.label == gb.label).all() and (ga.row == gb.row).all()
+                    assert gb.patches is None             # not sent back unless asked for
+            if repeat == 0:
+                assert b.carried > 0
+        here.forget_frames()
+        there.forget_frames()
+        a, b = here.process(*frames[3]), there.process(*frames[3])
+        assert a.carried == b.carried == 0
+        there.keep_patches = True
+        assert there.process(*frames[4]).left.patches is not None
+        # an error in a worker is raised here, and the next frame goes on
+        with pytest.raises(AttributeError):
+            there._procs.run((frames[0][0], frames[0][1]), (None, None),
+                             (_job(frames[0][0]), _job(frames[0][1])))
+        after = there.process(*frames[5]).points.tobytes()
+        assert after == here.process(*frames[5]).points.tobytes()
+    finally:
+        here.close()
+        there.close()

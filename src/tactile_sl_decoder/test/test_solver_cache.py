@@ -1,0 +1,119 @@
+"""Reference inversions kept on disk: read back bit for bit, never a wrong or broken entry."""
+import os
+import warnings
+
+import numpy as np
+import pytest
+
+from tactile_sl_common.elasticity import Elastomer
+from tactile_sl_decoder.touch import solver_cache
+from tactile_sl_decoder.touch.solver_cache import SolverCache
+from tactile_sl_decoder.touch.traction import TractionParams, TractionSolver
+
+PAD = Elastomer(3e5, 0.49, 0.0)
+PITCH = 5e-4
+SHAPE = (9, 11)
+CELLS = np.setdiff1d(np.arange(SHAPE[0] * SHAPE[1]), [0, 7, 50])   # a few not decoded
+
+
+def _field(cells: np.ndarray, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    rows, cols = np.divmod(cells, SHAPE[1])
+    dent = -2e-5 * np.exp(-((rows - 4) ** 2 + (cols - 5) ** 2) / 6.0)
+    disp = np.column_stack([1e-6 * rng.standard_normal(len(cells)) + 0.2 * dent,
+                            1e-6 * rng.standard_normal(len(cells)), dent])
+    valid = np.ones(len(cells), bool)
+    valid[[4, 20]] = False
+    return disp, valid
+
+
+def _same(a: TractionSolver, b: TractionSolver) -> None:
+    assert a.area_fraction == b.area_fraction and a.scale == b.scale
+    assert a.moment_noise == b.moment_noise
+    assert np.array_equal(a._wrench_rows, b._wrench_rows)
+    for x, y in zip(a._map_rows, b._map_rows):
+        assert x.dtype == y.dtype == np.float32 and np.array_equal(x, y)
+    assert np.array_equal(a._g32, b._g32)
+    disp, valid = _field(a.cells)
+    fa, wa = a.solve(disp, valid)
+    fb, wb = b.solve(disp, valid)
+    assert fa.tobytes() == fb.tobytes() and wa.tobytes() == wb.tobytes()
+
+
+def test_an_inversion_read_back_gives_the_same_bytes(tmp_path):
+    cache = SolverCache(tmp_path)
+    plain = TractionSolver(PAD, PITCH, SHAPE, CELLS)
+    first = TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
+    assert (cache.hits, cache.misses) == (0, 1) and len(list(tmp_path.glob("*.npz"))) == 1
+    again = TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
+    assert (cache.hits, cache.misses) == (1, 1)
+    _same(plain, first)
+    _same(plain, again)
+
+
+@pytest.mark.parametrize("change", ["cells", "weights", "pad", "mirrored", "pitch"])
+def test_anything_the_inversion_depends_on_gives_another_entry(tmp_path, change):
+    cache = SolverCache(tmp_path)
+    TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
+    args = dict(elastomer=PAD, pitch=PITCH, shape=SHAPE, cells=CELLS, params=None,
+                mirrored=False)
+    args.update({"cells": {"cells": CELLS[1:]},
+                 "weights": {"params": TractionParams(map_weight=0.5)},
+                 "pad": {"elastomer": Elastomer(3e5, 0.45, 0.0)},
+                 "mirrored": {"mirrored": True}, "pitch": {"pitch": 6e-4}}[change])
+    other = TractionSolver(cache=cache, **args)
+    assert (cache.hits, cache.misses) == (0, 2)
+    _same(other, TractionSolver(**args))
+
+
+def test_the_key_holds_the_code_that_builds_the_inversion(tmp_path, monkeypatch):
+    cache = SolverCache(tmp_path)
+    TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
+    monkeypatch.setattr("tactile_sl_decoder.touch.traction._code_digest", lambda: "edited")
+    TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
+    assert (cache.hits, cache.misses) == (0, 2)
+
+
+def test_a_broken_entry_is_computed_again_with_a_warning(tmp_path):
+    cache = SolverCache(tmp_path)
+    TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
+    (entry,) = tmp_path.glob("*.npz")
+    entry.write_bytes(entry.read_bytes()[:1000])        # cut short: a crash while copying
+    with pytest.warns(UserWarning, match="unreadable"):
+        solver = TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
+    _same(solver, TractionSolver(PAD, PITCH, SHAPE, CELLS))
+    with warnings.catch_warnings():                     # and it was written again, whole
+        warnings.simplefilter("error")
+        _same(TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache), solver)
+
+
+def test_a_directory_that_cannot_be_written_only_warns(tmp_path):
+    blocked = tmp_path / "file"
+    blocked.write_text("not a directory")
+    cache = SolverCache(blocked / "traction")
+    with pytest.warns(UserWarning, match="cannot write"):
+        solver = TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
+    _same(solver, TractionSolver(PAD, PITCH, SHAPE, CELLS))
+    assert blocked.read_text() == "not a directory"
+
+
+def test_the_least_recently_used_entries_go(tmp_path):
+    cache = SolverCache(tmp_path, max_entries=2)
+    keep = TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
+    (first,) = tmp_path.glob("*.npz")
+    os.utime(first, (1, 1))
+    TractionSolver(PAD, PITCH, SHAPE, CELLS[1:], cache=cache)
+    TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)        # used again: recent
+    TractionSolver(PAD, PITCH, SHAPE, CELLS[2:], cache=cache)    # a third: the oldest goes
+    names = {p.name for p in tmp_path.glob("*.npz")}
+    assert len(names) == 2 and first.name in names
+    assert not list(tmp_path.glob(".tmp-*"))
+    _same(keep, TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache))
+
+
+def test_the_default_directory_follows_xdg(monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert solver_cache.default_directory() == tmp_path / "tactile_sl" / "traction"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert solver_cache.default_directory() == tmp_path / ".cache" / "tactile_sl" / "traction"
