@@ -15,9 +15,9 @@ from test_touch_stage import _points
 from test_touch_traction import PITCH, SHAPE
 
 from tactile_sl_common.elasticity import Elastomer, surface_displacement
-from tactile_sl_sim.loads import LoadContact, touch_truth
 from tactile_sl_decoder.touch.sensor import SensorConfig
 from tactile_sl_decoder.touch.stage import TouchStage
+from tactile_sl_sim.loads import LoadContact, touch_truth
 
 SUB = 10
 HALF = Elastomer(3e5, 0.49, 0.0)

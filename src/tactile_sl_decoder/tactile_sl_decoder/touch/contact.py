@@ -13,10 +13,9 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.jit import helper, kernel
 from tactile_sl_decoder.touch.support import SupportRegions, support_regions
-
-from tactile_sl_common.settings import SettingsTable
 
 
 @dataclass

@@ -142,8 +142,11 @@ class TractionSolver:
             cache.store(key, self._stored())
 
     def _invert(self, g: np.ndarray, x: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
-        """The regularised inverses: resultant rows, per-component map rows and, with
-        ``support_weight`` > 0, the constrained inversion's normal rows and inverse block."""
+        """The regularised inverses (resultant, map and, if wanted, support rows).
+
+        With ``support_weight`` > 0 also the constrained inversion's normal rows and the
+        normal block of its inverse (:meth:`support_pressure`).
+        """
         n = len(self.cells)
         h = g.T @ g
         scale = float(np.mean(np.diag(h)))
