@@ -34,10 +34,22 @@ def _same(a: TractionSolver, b: TractionSolver) -> None:
     for x, y in zip(a._map_rows, b._map_rows):
         assert x.dtype == y.dtype == np.float32 and np.array_equal(x, y)
     assert np.array_equal(a._g32, b._g32)
+    # the constrained inversion of the contact area (support_pressure) comes back too
+    assert a.has_support == b.has_support
+    assert a.support_gain.tobytes() == b.support_gain.tobytes()
+    assert a._support_inverse.tobytes() == b._support_inverse.tobytes()
+    if a._support_rows is not None and b._support_rows is not None:
+        assert a._support_rows.dtype == b._support_rows.dtype == np.float32
+        assert a._support_rows.tobytes() == b._support_rows.tobytes()
     disp, valid = _field(a.cells)
     fa, wa = a.solve(disp, valid)
     fb, wb = b.solve(disp, valid)
     assert fa.tobytes() == fb.tobytes() and wa.tobytes() == wb.tobytes()
+    pa = a.support_pressure(1e-6, 2.0, 5.0)
+    pb = b.support_pressure(1e-6, 2.0, 5.0)
+    assert (pa is None) == (pb is None) == (not a.has_support)
+    if pa is not None and pb is not None:
+        assert pa.tobytes() == pb.tobytes() and pa.max() > 0
 
 
 def test_an_inversion_read_back_gives_the_same_bytes(tmp_path):
@@ -49,9 +61,20 @@ def test_an_inversion_read_back_gives_the_same_bytes(tmp_path):
     assert (cache.hits, cache.misses) == (1, 1)
     _same(plain, first)
     _same(plain, again)
+    assert plain.has_support
 
 
-@pytest.mark.parametrize("change", ["cells", "weights", "pad", "mirrored", "pitch"])
+def test_a_solver_without_the_support_inversion_reads_back_without_it(tmp_path):
+    cache = SolverCache(tmp_path)
+    params = TractionParams(support_weight=0.0)
+    TractionSolver(PAD, PITCH, SHAPE, CELLS, params, cache=cache)
+    again = TractionSolver(PAD, PITCH, SHAPE, CELLS, params, cache=cache)
+    assert cache.hits == 1 and not again.has_support
+    _same(TractionSolver(PAD, PITCH, SHAPE, CELLS, params), again)
+
+
+@pytest.mark.parametrize("change", ["cells", "weights", "support", "pad", "mirrored",
+                                    "pitch"])
 def test_anything_the_inversion_depends_on_gives_another_entry(tmp_path, change):
     cache = SolverCache(tmp_path)
     TractionSolver(PAD, PITCH, SHAPE, CELLS, cache=cache)
@@ -59,6 +82,7 @@ def test_anything_the_inversion_depends_on_gives_another_entry(tmp_path, change)
                 mirrored=False)
     args.update({"cells": {"cells": CELLS[1:]},
                  "weights": {"params": TractionParams(map_weight=0.5)},
+                 "support": {"params": TractionParams(support_weight=1e-3)},
                  "pad": {"elastomer": Elastomer(3e5, 0.45, 0.0)},
                  "mirrored": {"mirrored": True}, "pitch": {"pitch": 6e-4}}[change])
     other = TractionSolver(cache=cache, **args)
