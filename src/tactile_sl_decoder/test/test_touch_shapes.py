@@ -9,6 +9,7 @@ the depth), and given to the touch stage.  The truth is the simulator's (area wh
 traction presses, largest indentation of the fine grid).  Before issue 25 the area came from
 a threshold calibrated on spheres: a flat punch's was 100 % too large.
 """
+import cv2
 import numpy as np
 import pytest
 from test_touch_stage import _points
@@ -17,6 +18,7 @@ from test_touch_traction import PITCH, SHAPE
 from tactile_sl_common.elasticity import Elastomer, surface_displacement
 from tactile_sl_decoder.touch.sensor import SensorConfig
 from tactile_sl_decoder.touch.stage import TouchStage
+from tactile_sl_decoder.touch.support import constrained_edge
 from tactile_sl_sim.loads import LoadContact, touch_truth
 
 SUB = 10
@@ -89,3 +91,54 @@ def test_support_pressure_is_non_negative_and_local(stage):
     faint, _ = _field([LoadContact(radius=4e-3, force=(0, 0, -0.02))])
     stage.update(_points(faint))
     assert stage.solver.support_pressure(noise, 2.0, 5.0) is None
+
+
+def reference_constrained_edge(free, clear, rows, cols, shape, inverse, cells, max_rounds):
+    """The numpy version of :func:`~tactile_sl_decoder.touch.support.constrained_edge`."""
+    grid = np.zeros(shape, np.uint8)
+    grid[rows[clear], cols[clear]] = 1
+    square = np.ones((3, 3), np.uint8)
+    edge = (cv2.dilate(grid, square) > 0) & (cv2.erode(grid, square, borderValue=1) == 0)
+    ring_at = np.flatnonzero(edge[rows, cols])
+    ring = cells[ring_at]
+    near = inverse[np.ix_(ring, ring)]
+    free_ring = free[ring_at]
+    p_ring = free_ring
+    held = free_ring < 0.0
+    for _ in range(max_rounds):
+        at = np.flatnonzero(held)
+        if len(at) == 0:
+            p_ring = free_ring
+            break
+        nu = np.linalg.solve(near[np.ix_(at, at)].T, -free_ring[at])
+        if (nu < 0.0).any():
+            held[at[nu < 0.0]] = False
+            continue
+        p_ring = free_ring + near[at].T @ nu
+        p_ring[at] = 0.0
+        more = (p_ring < -1e-12 * np.abs(free_ring).max()) & ~held
+        if not more.any():
+            break
+        held |= more
+    p = free.copy()
+    p[ring_at] = p_ring
+    return p
+
+
+@pytest.mark.parametrize("name", list(SHAPES))
+def test_compiled_constrained_edge_equals_the_numpy_version(stage, name):
+    solver = stage.solver
+    disp, _ = _field(SHAPES[name])
+    rng = np.random.default_rng(7)
+    stage.update(_points(disp + rng.normal(0.0, NOISE, disp.shape)))
+    u32, window = solver._near
+    free = (solver._support_rows[window] @ u32).astype(np.float64)
+    noise = stage.contact_params.displacement_noise
+    clear = free > 2.0 * noise * solver.support_gain[window]
+    args = (free, clear, solver.rows[window], solver.cols[window])
+    got = constrained_edge(*args, *SHAPE, solver._support_inverse, window, 30)
+    want = reference_constrained_edge(*args, SHAPE, solver._support_inverse, window, 30)
+    assert (free < 0).any() and not np.array_equal(want, free)   # the constraint acts
+    # the same cells held; the products summed in another order (loops, not BLAS)
+    assert np.array_equal(got == 0.0, want == 0.0)
+    assert np.allclose(got, want, rtol=1e-9, atol=1e-12 * np.abs(free).max())

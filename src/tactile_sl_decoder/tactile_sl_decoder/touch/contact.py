@@ -137,23 +137,38 @@ def max_indentation(indent: np.ndarray, noise: float = 3e-6) -> float:
 
 
 @helper
-def _kept(z: np.ndarray, r: int, c: int, limit: float) -> bool:
+def _kept(z: np.ndarray, r: int, c: int, limit: float, memo: np.ndarray) -> bool:
+    """:func:`_kept_cell`, each cell worked out once (``memo``: -1 not yet, 0 no, 1 yes).
+
+    The neighbourhoods of the deepest cells overlap: most cells are asked about many times.
+    """
+    rows, cols = z.shape
+    if r < 0 or c < 0 or r >= rows or c >= cols:
+        return False
+    if memo[r, c] < 0:
+        memo[r, c] = 1 if _kept_cell(z, r, c, limit) else 0
+    return memo[r, c] == 1
+
+
+@helper
+def _kept_cell(z: np.ndarray, r: int, c: int, limit: float) -> bool:
     """Decoded, and near the quadratic through its 8 neighbours or near their median."""
     rows, cols = z.shape
-    if r < 0 or c < 0 or r >= rows or c >= cols or not np.isfinite(z[r, c]):
+    if not np.isfinite(z[r, c]):
         return False
     if r < 1 or c < 1 or r + 1 >= rows or c + 1 >= cols:
         return True                         # not all 8 neighbours: not tested
     pred = 0.0
-    ring = np.empty(8)
     for j in range(8):
         v = z[r + _DR[_RING[j]], c + _DC[_RING[j]]]
         if not np.isfinite(v):
             return True
         pred += _FROM_RING[j] * v
-        ring[j] = v
     if abs(z[r, c] - pred) <= limit:
         return True
+    ring = np.empty(8)                 # (allocated only here: the rare cell off the fit)
+    for j in range(8):
+        ring[j] = z[r + _DR[_RING[j]], c + _DC[_RING[j]]]
     ring.sort()                        # and off the neighbours' median: a lone cell
     return abs(z[r, c] - 0.5 * (ring[3] + ring[4])) <= limit
 
@@ -215,17 +230,19 @@ def _deepest(z: np.ndarray, count: int) -> tuple[np.ndarray, float]:
 
 
 @helper
-def _fit(z: np.ndarray, r: int, c: int, limit: float, coef: np.ndarray) -> float:
+def _fit(z: np.ndarray, r: int, c: int, limit: float, coef: np.ndarray,
+         normal: np.ndarray, memo: np.ndarray) -> float:
     """Quadratic through the kept cells of (r, c)'s 3x3 into ``coef``; its residual RMS.
 
-    -1 when fewer than 7 cells are kept (or the fit is singular).
+    -1 when fewer than 7 cells are kept (or the fit is singular).  ``normal``: a 6x6
+    scratch array for the normal equations.
     """
-    normal = np.zeros((6, 6))
+    normal[:, :] = 0.0
     coef[:] = 0.0
     count = 0
     for j in range(9):
         rr, cc = r + _DR[j], c + _DC[j]
-        if not _kept(z, rr, cc, limit):
+        if not _kept(z, rr, cc, limit, memo):
             continue
         count += 1
         for a in range(6):
@@ -237,7 +254,7 @@ def _fit(z: np.ndarray, r: int, c: int, limit: float, coef: np.ndarray) -> float
     ss = 0.0
     for j in range(9):
         rr, cc = r + _DR[j], c + _DC[j]
-        if _kept(z, rr, cc, limit):
+        if _kept(z, rr, cc, limit, memo):
             f = 0.0
             for a in range(6):
                 f += _DESIGN[j, a] * coef[a]
@@ -273,12 +290,12 @@ def _gain(cf: np.ndarray, threshold: float) -> tuple[float, float, float]:
 
 @helper
 def _predicts_cross(z: np.ndarray, r0: int, c0: int, cf: np.ndarray, limit: float,
-                    noise: float) -> bool:
+                    noise: float, memo: np.ndarray) -> bool:
     """The fit predicts at least two kept cells two cells away along rows and columns."""
     checked = 0
     for k in range(4):
         dr, dc = _CROSS_CHECK[k, 0], _CROSS_CHECK[k, 1]
-        if _kept(z, r0 + dr, c0 + dc, limit):
+        if _kept(z, r0 + dr, c0 + dc, limit, memo):
             checked += 1
             q = (cf[0] + cf[1] * dc + cf[2] * dr + cf[3] * dc * dc + cf[4] * dr * dr
                  + cf[5] * dc * dr)
@@ -303,6 +320,8 @@ def _max_indentation(z: np.ndarray, noise: float, candidates: int, outlier_sigma
     best_cell = -1
     coef = np.zeros(6)
     best_coef = np.zeros(6)
+    normal = np.zeros((6, 6))
+    memo = np.full(z.shape, -1, np.int8)
     for m in range(candidates):
         i = top[m]
         if i < 0:
@@ -310,12 +329,12 @@ def _max_indentation(z: np.ndarray, noise: float, candidates: int, outlier_sigma
         r, c = i // cols, i % cols
         for dr in range(-2, 3):
             for dc in range(-2, 3):
-                if _kept(z, r + dr, c + dc, limit):
+                if _kept(z, r + dr, c + dc, limit, memo):
                     kept_best = max(kept_best, z[r + dr, c + dc])
-        if not _kept(z, r, c, limit):
+        if not _kept(z, r, c, limit, memo):
             continue
         deepest_kept = max(deepest_kept, z[r, c])
-        rms = _fit(z, r, c, limit, coef)
+        rms = _fit(z, r, c, limit, coef, normal, memo)
         if rms < 0.0:
             continue
         smooth = rms <= fit_sigmas * noise
@@ -333,7 +352,7 @@ def _max_indentation(z: np.ndarray, noise: float, candidates: int, outlier_sigma
         sx, sy, gain = _gain(best_coef, -curvature_sigmas * _CURVATURE_SPREAD * noise)
         if (gain > 0.0 and abs(sx) <= 1.0 and abs(sy) <= 1.0
                 and _predicts_cross(z, best_cell // cols, best_cell % cols, best_coef, limit,
-                                    noise)):
+                                    noise, memo)):
             best += gain
     return max(best, 0.0)
 
@@ -453,6 +472,8 @@ def _support_parts(found: SupportRegions, labels: np.ndarray, k: int, rows: np.n
            if labels.flat[found.peak[j]] == k]
     if not ids:
         return []
+    if len(ids) == 1:                      # one contact in this map region: all its cells
+        return [(ids[0], np.ones(len(rows), bool))]
     seeds = np.isin(found.labels, ids) & found.support
     _, (near_r, near_c) = ndimage.distance_transform_edt(~seeds, return_indices=True)
     owner = found.labels[near_r[rows, cols], near_c[rows, cols]]

@@ -275,3 +275,98 @@ def _support_regions(pressure: np.ndarray, noise: np.ndarray, sigmas: float) -> 
             area[labels[r, c]] += share[r, c]
     area[0] = 0.0
     return labels, share, support, area, cells, snr, beta, peak
+
+
+@helper
+def _edge_ring(clear: np.ndarray, rows: np.ndarray, cols: np.ndarray, grid_rows: int,
+               grid_cols: int) -> np.ndarray:
+    """Positions of the cells within one cell of a ``clear`` cell and of one that is not.
+
+    Outside the grid counts as clear (a 3x3 dilation minus a 3x3 erosion).
+    """
+    n = len(rows)
+    grid = np.zeros((grid_rows, grid_cols), np.bool_)
+    for k in range(n):
+        if clear[k]:
+            grid[rows[k], cols[k]] = True
+    ring = np.empty(n, np.int64)
+    m = 0
+    for k in range(n):
+        grown, eroded = False, True
+        for dr in range(-1, 2):
+            for dc in range(-1, 2):
+                rr, cc = rows[k] + dr, cols[k] + dc
+                if 0 <= rr < grid_rows and 0 <= cc < grid_cols:
+                    if grid[rr, cc]:
+                        grown = True
+                    else:
+                        eroded = False
+        if grown and not eroded:
+            ring[m] = k
+            m += 1
+    return ring[:m]
+
+
+@helper
+def _held_response(inverse: np.ndarray, ring: np.ndarray, at: np.ndarray,
+                   nu: np.ndarray) -> np.ndarray:
+    """M[ring, ring[at]] @ nu, M symmetric (read along its rows, one per held cell)."""
+    out = np.zeros(len(ring))
+    for j in range(len(at)):
+        row = inverse[ring[at[j]]]
+        for i in range(len(ring)):
+            out[i] += row[ring[i]] * nu[j]
+    return out
+
+
+@kernel("float64[::1](float64[::1], boolean[::1], int64[::1], int64[::1], int64, int64, "
+        "float64[:, ::1], int64[::1], int64)")
+def constrained_edge(free: np.ndarray, clear: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                     grid_rows: int, grid_cols: int, inverse: np.ndarray, cells: np.ndarray,
+                     max_rounds: int) -> np.ndarray:
+    """The pressure ``free`` of cells near a contact, held >= 0 at the edge of the ``clear``.
+
+    ``free`` (window,) is the unconstrained pressure of the window's cells (``cells``: their
+    indices into ``inverse``, ``rows``/``cols``: their places on the grid), ``clear`` marks
+    those that clearly press.  Only the ring at the edge of the clear cells (the window's
+    cells within one cell of a clear cell and of a cell that is not; outside the grid
+    counts as clear) is held >= 0 (the ringing of the unconstrained inversion around a
+    contact is what the constraint removes).  With the ring's cells N held at zero,
+    p = p0 + M[:, N] nu and M[N, N] nu = -p0[N], M = ``inverse`` (the normal block of the
+    constrained inversion's inverse, symmetric); a held cell whose multiplier nu pulls is
+    released, a free one that would pull is held (Lawson and Hanson, Solving Least Squares
+    Problems, 1974, ch. 23, in the dual form), for at most ``max_rounds`` rounds.  Returns
+    the window's pressure (the ring's constrained, the others as given; not clipped).
+    """
+    p = free.copy()
+    ring_at = _edge_ring(clear, rows, cols, grid_rows, grid_cols)
+    m = len(ring_at)
+    if m == 0:
+        return p
+    ring = cells[ring_at]
+    free_ring = free[ring_at]
+    scale = np.abs(free_ring).max()
+    p_ring = free_ring.copy()
+    held = free_ring < 0.0
+    for _ in range(max_rounds):
+        at = np.flatnonzero(held)
+        h = len(at)
+        if h == 0:
+            p_ring = free_ring.copy()
+            break
+        block = np.empty((h, h))
+        for i in range(h):
+            for j in range(h):
+                block[i, j] = inverse[ring[at[j]], ring[at[i]]]
+        nu = np.linalg.solve(block, -free_ring[at])
+        if np.any(nu < 0.0):                  # its multiplier pulls: let that cell go
+            held[at[nu < 0.0]] = False
+            continue
+        p_ring = free_ring + _held_response(inverse, ring, at, nu)
+        p_ring[at] = 0.0
+        more = (p_ring < -1e-12 * scale) & ~held
+        if not np.any(more):
+            break
+        held |= more
+    p[ring_at] = p_ring
+    return p

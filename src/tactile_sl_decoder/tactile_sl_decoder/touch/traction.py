@@ -55,6 +55,7 @@ from tactile_sl_common.elasticity import Elastomer, cell_kernel
 from tactile_sl_decoder.touch import cholesky
 from tactile_sl_decoder.touch.cholesky import cho_factor_upper, cho_solve_upper
 from tactile_sl_decoder.touch.solver_cache import SolverCache, entry_key, source_digest
+from tactile_sl_decoder.touch.support import constrained_edge
 
 
 @dataclass
@@ -95,6 +96,21 @@ _STORED = ("scale", "wrench_rows", "map_0", "map_1", "map_2", "area_fraction",
 def _code_digest() -> str:
     """The source of the code an inversion comes from (part of its cache key)."""
     return source_digest(sys.modules[__name__], cholesky)
+
+
+def _rows_product(matrix: np.ndarray, rows: np.ndarray, vector: np.ndarray) -> np.ndarray:
+    """``(matrix[rows] @ vector)`` in float64 without copying the rows (sorted, unique).
+
+    One product per run of consecutive rows (the cells of one grid row near a contact): the
+    rows are read in place, and rows between the runs (between two contacts) not at all.
+    """
+    out = np.empty(len(rows))
+    if len(rows) == 0:
+        return out
+    breaks = np.flatnonzero(np.diff(rows) != 1) + 1
+    for start, stop in zip(np.concatenate(([0], breaks)), np.concatenate((breaks, [len(rows)]))):
+        out[start:stop] = matrix[rows[start]:rows[stop - 1] + 1] @ vector
+    return out
 
 
 class TractionSolver:
@@ -303,52 +319,22 @@ class TractionSolver:
         constrained inversion, or when no cell presses by ``min_snr`` x its noise before the
         constraint (the support could not locate an edge: the area comes from the map; this
         also spares the active set on faint, wide contacts, whose window is the largest).
-        See the module docstring (support weight) for the active set; after ``max_rounds``
-        a cell still pulling is clipped to zero.
+        The active set is :func:`~tactile_sl_decoder.touch.support.constrained_edge`
+        (compiled); after ``max_rounds`` a cell still pulling is clipped to zero.
         """
         if self._support_rows is None or self._near is None or len(self._near[1]) == 0:
             return None
         u32, window = self._near
-        band = slice(int(window[0]), int(window[-1]) + 1)     # cells are row-major
-        free = (self._support_rows[band] @ u32).astype(np.float64)[window - band.start]
+        free = _rows_product(self._support_rows, window, u32)
         if not np.any(free > min_snr * noise * self.support_gain[window]):
             return None
         out = np.zeros(len(self.cells))
-        inverse = self._support_inverse
-        # only cells at the edge of those that clearly press (one cell either side) are
-        # held: the ringing of the unconstrained inversion around a contact is what the
-        # constraint removes; noise pulling farther away is left as it is (those cells do
-        # not press anyway), and the inside of a contact presses clearly
-        sigma = noise * self.support_gain[window]
-        grid = np.zeros(self.shape, np.uint8)
-        clear = free > sigmas * sigma
-        grid[self.rows[window[clear]], self.cols[window[clear]]] = 1
-        square = np.ones((3, 3), np.uint8)
-        edge = (cv2.dilate(grid, square) > 0) & (cv2.erode(grid, square, borderValue=1) == 0)
-        ring = np.flatnonzero(edge[self.rows[window], self.cols[window]])
-        near = inverse[np.ix_(window[ring], window[ring])]      # the ring's block, once
-        free_ring = free[ring]
-        p_ring = free_ring
-        held = free_ring < 0.0
-        for _ in range(max_rounds):
-            at = np.flatnonzero(held)
-            if len(at) == 0:
-                p_ring = free_ring
-                break
-            nu = np.linalg.solve(near[np.ix_(at, at)], -free_ring[at])
-            pulling = nu < 0.0
-            if pulling.any():                 # its multiplier pulls: let that cell go
-                held[at[pulling]] = False
-                continue
-            p_ring = free_ring + near[:, at] @ nu
-            p_ring[at] = 0.0
-            more = (p_ring < -1e-12 * np.abs(free_ring).max()) & ~held
-            if not more.any():
-                break
-            held |= more
-        # away from the edge the held cells change little: the unconstrained values stay
-        p = free.copy()
-        p[ring] = p_ring
+        # only cells at the edge of those that clearly press are held (one cell either side):
+        # noise pulling farther away is left as it is (those cells do not press anyway), and
+        # the inside of a contact presses clearly
+        clear = free > sigmas * noise * self.support_gain[window]
+        p = constrained_edge(free, clear, self.rows[window], self.cols[window], self.shape[0],
+                             self.shape[1], self._support_inverse, window, int(max_rounds))
         out[window] = np.maximum(p, 0.0)
         return out
 
