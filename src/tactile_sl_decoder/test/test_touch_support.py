@@ -7,12 +7,14 @@ of cell-averaged pressures of a sphere, a flat punch and a uniform disc against 
 import cv2
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from tactile_sl_decoder.touch.support import (
     THIN_BETA,
     edge_coverage,
     edge_exponent,
     edge_ratio,
+    nearest_seed_label,
     ring_ratio,
     support_regions,
 )
@@ -173,3 +175,24 @@ def test_compiled_regions_equal_the_numpy_version():
         # the numpy version averages neighbours in float32 (cv2.filter2D)
         assert np.allclose(share, got.share, atol=1e-5)
         assert np.allclose(area[k], got.area_cells[to[k]], atol=1e-4)
+
+
+def test_nearest_seed_label_equals_the_distance_transform():
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        rows, cols = rng.integers(2, 30, 2)
+        labels = rng.integers(1, 4, (rows, cols)).astype(np.int32)
+        seeds = rng.random((rows, cols)) < rng.uniform(0.02, 0.6)
+        seeds[rng.integers(rows), rng.integers(cols)] = True
+        r, c = (a.ravel() for a in np.mgrid[0:rows, 0:cols])
+        got = nearest_seed_label(labels, seeds, r, c)
+        dist, (nr, nc) = ndimage.distance_transform_edt(~seeds, return_indices=True)
+        want = labels[nr, nc].ravel()
+        # where two seeds of different labels are equally near either may win
+        sr, sc = np.nonzero(seeds)
+        d2 = (sr[None, :] - r[:, None]) ** 2 + (sc[None, :] - c[:, None]) ** 2
+        nearest = d2 == d2.min(axis=1, keepdims=True)
+        tie = np.array([len(set(labels[sr[m], sc[m]])) > 1 for m in nearest])
+        assert np.array_equal(got[~tie], want[~tie])
+        assert all(g in labels[sr[m], sc[m]] for g, m in zip(got[tie], nearest[tie]))
+        assert np.allclose(dist.ravel() ** 2, d2.min(axis=1))

@@ -11,11 +11,14 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.jit import helper, kernel
-from tactile_sl_decoder.touch.support import SupportRegions, support_regions
+from tactile_sl_decoder.touch.support import (
+    SupportRegions,
+    nearest_seed_label,
+    support_regions,
+)
 
 
 @dataclass
@@ -475,8 +478,8 @@ def _support_parts(found: SupportRegions, labels: np.ndarray, k: int, rows: np.n
     if len(ids) == 1:                      # one contact in this map region: all its cells
         return [(ids[0], np.ones(len(rows), bool))]
     seeds = np.isin(found.labels, ids) & found.support
-    _, (near_r, near_c) = ndimage.distance_transform_edt(~seeds, return_indices=True)
-    owner = found.labels[near_r[rows, cols], near_c[rows, cols]]
+    owner = nearest_seed_label(found.labels, seeds, np.ascontiguousarray(rows, np.int64),
+                               np.ascontiguousarray(cols, np.int64))
     return [(j, owner == j) for j in ids if np.any(owner == j)]
 
 

@@ -370,3 +370,45 @@ def constrained_edge(free: np.ndarray, clear: np.ndarray, rows: np.ndarray, cols
         held |= more
     p[ring_at] = p_ring
     return p
+
+
+@kernel("int32[::1](int32[:, ::1], boolean[:, ::1], int64[::1], int64[::1])")
+def nearest_seed_label(labels: np.ndarray, seeds: np.ndarray, rows: np.ndarray,
+                       cols: np.ndarray) -> np.ndarray:
+    """The ``labels`` of the ``seeds`` cell nearest (Euclidean) to each cell (rows, cols).
+
+    A seed cell is its own nearest.  For any other cell the nearest seed lies on the seeds'
+    boundary (a seed with a 4-neighbour that is not one: from a seed whose 4-neighbours are
+    all seeds, the step towards the cell is a seed nearer to it), so only those are
+    compared.  Ties go to the first in row-major order.  0 without seeds.
+    """
+    grid_rows, grid_cols = seeds.shape
+    edge_r = np.empty(grid_rows * grid_cols, np.int64)
+    edge_c = np.empty(grid_rows * grid_cols, np.int64)
+    m = 0
+    for r in range(grid_rows):
+        for c in range(grid_cols):
+            if not seeds[r, c]:
+                continue
+            inner = True
+            for dr, dc in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+                rr, cc = r + dr, c + dc
+                if 0 <= rr < grid_rows and 0 <= cc < grid_cols and not seeds[rr, cc]:
+                    inner = False
+            if not inner:
+                edge_r[m] = r
+                edge_c[m] = c
+                m += 1
+    out = np.zeros(len(rows), np.int32)
+    for k in range(len(rows)):
+        r, c = rows[k], cols[k]
+        if seeds[r, c]:
+            out[k] = labels[r, c]
+            continue
+        best = np.inf
+        for j in range(m):
+            d = (edge_r[j] - r) ** 2 + (edge_c[j] - c) ** 2
+            if d < best:
+                best = d
+                out[k] = labels[edge_r[j], edge_c[j]]
+    return out
