@@ -14,7 +14,9 @@ since 2026-12-02 (issue 29), when the right-sized classifier became the default
 (robust_damaged_print gained two cells in two frames, checked against the ground truth:
 coverage 99.39 -> 99.48 %, 0 wrong; every other bag byte-identical, and every bag with the
 LeNet weights), and when the two slip bags were added (issue 24: slip_halfspace,
-slip_two_contacts).  A change that alters any output, even in the last bit, fails here; when a
+slip_two_contacts), and when the contact area came from the support of a non-negative
+traction inversion and the largest indentation became robust to wrong cells (issue 25: the
+contact topic of every bag; points, field, wrench, depth and slip byte-identical).  A change that alters any output, even in the last bit, fails here; when a
 change is *meant* to alter them (a better decoder), record the digests again and say so in
 the commit.
 
