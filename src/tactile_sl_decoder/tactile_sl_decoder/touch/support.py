@@ -308,6 +308,51 @@ def _edge_ring(clear: np.ndarray, rows: np.ndarray, cols: np.ndarray, grid_rows:
 
 
 @helper
+def _cholesky_solve(a: np.ndarray, b: np.ndarray) -> bool:
+    """Solve a x = b in place (b <- x, a overwritten) for a symmetric positive definite a.
+
+    Cholesky a = L L^T (Golub and Van Loan, Matrix Computations, 4th ed., alg. 4.2.1), from
+    a's lower triangle; then the two triangular solves.  False when a pivot is not positive.
+    """
+    n = a.shape[0]
+    for j in range(n):
+        d = a[j, j]
+        for k in range(j):
+            d -= a[j, k] * a[j, k]
+        if d <= 0.0:
+            return False
+        d = np.sqrt(d)
+        a[j, j] = d
+        for i in range(j + 1, n):
+            total = a[i, j]
+            for k in range(j):
+                total -= a[i, k] * a[j, k]
+            a[i, j] = total / d
+    for i in range(n):
+        total = b[i]
+        for k in range(i):
+            total -= a[i, k] * b[k]
+        b[i] = total / a[i, i]
+    for i in range(n - 1, -1, -1):
+        total = b[i]
+        for k in range(i + 1, n):
+            total -= a[k, i] * b[k]
+        b[i] = total / a[i, i]
+    return True
+
+
+@helper
+def _transposed_block(inverse: np.ndarray, ring: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """M[ring[at], ring[at]]^T (M read along its rows)."""
+    h = len(at)
+    block = np.empty((h, h))
+    for j in range(h):
+        for i in range(h):
+            block[i, j] = inverse[ring[at[j]], ring[at[i]]]
+    return block
+
+
+@helper
 def _held_response(inverse: np.ndarray, ring: np.ndarray, at: np.ndarray,
                    nu: np.ndarray) -> np.ndarray:
     """M[ring, ring[at]] @ nu, M symmetric (read along its rows, one per held cell)."""
@@ -355,10 +400,13 @@ def constrained_edge(free: np.ndarray, clear: np.ndarray, rows: np.ndarray, cols
             p_ring = free_ring.copy()
             break
         block = np.empty((h, h))
-        for i in range(h):
-            for j in range(h):
-                block[i, j] = inverse[ring[at[j]], ring[at[i]]]
-        nu = np.linalg.solve(block, -free_ring[at])
+        for j in range(h):
+            row = inverse[ring[at[j]]]
+            for i in range(h):
+                block[i, j] = row[ring[at[i]]]
+        nu = -free_ring[at]
+        if not _cholesky_solve(block, nu):    # not positive definite (rounding): plain LU
+            nu = np.linalg.solve(_transposed_block(inverse, ring, at), -free_ring[at])
         if np.any(nu < 0.0):                  # its multiplier pulls: let that cell go
             held[at[nu < 0.0]] = False
             continue
