@@ -16,9 +16,9 @@ coverage 99.39 -> 99.48 %, 0 wrong; every other bag byte-identical, and every ba
 LeNet weights), and when the two slip bags were added (issue 24: slip_halfspace,
 slip_two_contacts), and when the contact area came from the support of a non-negative
 traction inversion and the largest indentation became robust to wrong cells (issue 25: the
-contact topic of every bag; points, field, wrench, depth and slip byte-identical).  A change that alters any output, even in the last bit, fails here; when a
-change is *meant* to alter them (a better decoder), record the digests again and say so in
-the commit.
+contact topic of every bag; points, field, wrench, depth and slip byte-identical).  A
+change that alters any output, even in the last bit, fails here; when a change is *meant*
+to alter them (a better decoder), record the digests again and say so in the commit.
 
 Bytes are only comparable on the CPU model they were recorded on: numpy and OpenCV pick
 SIMD code paths per CPU, which can move a float's last bit.  The file keeps them per CPU
