@@ -181,6 +181,21 @@ def fourier_compliance(elastomer: Elastomer, kx: np.ndarray, ky: np.ndarray) -> 
     return out
 
 
+def layer_quadrature() -> tuple[np.ndarray, np.ndarray]:
+    """Nodes t = k h and weights of the layer-minus-half-space integrals over [0, HALF_SPACE_KH].
+
+    Composite Gauss-Legendre, 60 panels of 12 nodes (the integrands decay as t^2 e^{-2t}
+    and are smooth, so each panel's rule is exact to its polynomial order).
+    """
+    panels, order = 60, 12
+    xg, wg = np.polynomial.legendre.leggauss(order)
+    edges = np.linspace(0.0, HALF_SPACE_KH, panels + 1)
+    half = np.diff(edges) / 2
+    t = (edges[:-1, None] + half[:, None] * (xg[None, :] + 1)).ravel()
+    w = (half[:, None] * wg[None, :]).ravel()
+    return t, w
+
+
 @functools.lru_cache(maxsize=8)
 def _layer_correction_table(nu: float) -> tuple[np.ndarray, interpolate.CubicSpline]:
     """Radial integrals of the layer-minus-half-space response, tabulated in rho = r / h.
@@ -192,12 +207,7 @@ def _layer_correction_table(nu: float) -> tuple[np.ndarray, interpolate.CubicSpl
     transform of a cos(n phi) term is a Hankel transform of order n; I.S. Gradshteyn,
     I.M. Ryzhik, Table of Integrals, 7th ed., 8.411.1). The integrands decay as t^2 e^{-2t}.
     """
-    panels, order = 60, 12
-    xg, wg = np.polynomial.legendre.leggauss(order)
-    edges = np.linspace(0.0, HALF_SPACE_KH, panels + 1)
-    half = np.diff(edges) / 2
-    t = (edges[:-1, None] + half[:, None] * (xg[None, :] + 1)).ravel()
-    w = (half[:, None] * wg[None, :]).ravel()
+    t, w = layer_quadrature()
     L, T, Z, Q = layer_compliance(t, nu)
     fa = ((L + T) / 2 - (2 - nu) / 2) * w
     fb = ((L - T) / 2 + nu / 2) * w

@@ -42,7 +42,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import special
 
-from tactile_sl_common.elasticity import HALF_SPACE_KH, Elastomer, layer_compliance
+from tactile_sl_common.elasticity import (
+    Elastomer,
+    layer_compliance,
+    layer_quadrature,
+)
 
 FUNCTIONS = ("A", "B", "C", "D")
 """The four radial functions of a table, in order (see the module docstring)."""
@@ -104,12 +108,7 @@ def layer_corrections(elastomer: Elastomer, radii: np.ndarray, r: np.ndarray) ->
     h, nu, mu = elastomer.thickness, elastomer.poisson_ratio, elastomer.shear_modulus
     if h <= 0:
         return np.zeros((len(radii), 4, len(r)))
-    panels, order = 60, 12
-    xg, wg = np.polynomial.legendre.leggauss(order)
-    edges = np.linspace(0.0, HALF_SPACE_KH, panels + 1)
-    half = np.diff(edges) / 2
-    t = (edges[:-1, None] + half[:, None] * (xg[None, :] + 1)).ravel()
-    w = (half[:, None] * wg[None, :]).ravel()
+    t, w = layer_quadrature()
     L, T, Z, Q = layer_compliance(t, nu)
     k = t / h
     ts = k[:, None] * radii[None, :]
