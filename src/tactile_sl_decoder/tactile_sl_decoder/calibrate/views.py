@@ -15,6 +15,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from tactile_sl_decoder.extract.extraction import ExtractionParams
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 
@@ -94,6 +95,8 @@ class ViewDecoder:
                  params: PipelineParams | None = None) -> None:
         params = params or PipelineParams(threads=1)
         params.decode.mirrored = bool(target.mirrored)
+        params.extraction = params.extraction or ExtractionParams()
+        params.extraction.perspective = True
         self.target = target
         self.pipeline = StereoPipeline(target.pattern, classifier, params)
 
