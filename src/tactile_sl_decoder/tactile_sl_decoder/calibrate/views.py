@@ -96,7 +96,8 @@ class ViewDecoder:
         params = params or PipelineParams(threads=1)
         params.decode.mirrored = bool(target.mirrored)
         params.extraction = params.extraction or ExtractionParams()
-        params.extraction.perspective = True
+        params.extraction.perspective = True     # tilted views (docs/calibration.md)
+        params.grid.local_gates = True
         self.target = target
         self.pipeline = StereoPipeline(target.pattern, classifier, params)
 
