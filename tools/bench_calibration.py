@@ -41,9 +41,9 @@ from tactile_sl_decoder.calibrate.simulate import (
     random_poses,
     render_board_views,
     render_pattern_views,
+    score_decoded_cells,
     tilted_pose,
     true_cells_left,
-    visible_cells,
 )
 from tactile_sl_decoder.stereo.stereo import StereoRig
 from tactile_sl_sim.render import Renderer
@@ -102,11 +102,8 @@ def tilted_view_rows(decoder: ViewDecoder, renderer: Renderer, artwork: object,
                      seed: int = 0) -> list[dict[str, object]]:
     """Per tilt and axis, per camera: visible cells, decoded share, wrong cells.
 
-    A glyph counts as decoded right when its cell is visible and its centre lies within
-    0.3 of that cell's image spacing of the cell's true projection; a decoded cell farther
-    off is wrong.
+    Scored by :func:`~tactile_sl_decoder.calibrate.simulate.score_decoded_cells`.
     """
-    rows, cols = target.shape
     out = []
     for axis in ("x", "y"):
         for tilt in tilts:
@@ -115,40 +112,14 @@ def tilted_view_rows(decoder: ViewDecoder, renderer: Renderer, artwork: object,
                                                   [pose], seed=seed)
             row: dict[str, object] = {"axis": axis, "tilt": tilt}
             for cam, glyphs in enumerate(decoder.decode_glyphs(left, right)):
-                vr, vc, vuv = visible_cells(renderer, pose, rows, cols, target.pitch_m, cam)
-                step = _image_steps(renderer, pose, vr, vc, target.pitch_m, cam)
-                truth = {(int(a), int(b)): (uv, s) for a, b, uv, s in zip(vr, vc, vuv, step)}
-                m = glyphs.row >= 0
-                right_cells = wrong = 0
-                for a, b, u, v in zip(glyphs.row[m], glyphs.col[m], glyphs.u[m], glyphs.v[m]):
-                    hit = truth.get((int(a), int(b)))
-                    if hit is None:
-                        continue        # decoded, but its glyph is not wholly in the image
-                    if np.hypot(u - hit[0][0], v - hit[0][1]) <= 0.3 * hit[1]:
-                        right_cells += 1
-                    else:
-                        wrong += 1
+                visible, right_cells, wrong = score_decoded_cells(
+                    renderer, pose, glyphs, target.shape, target.pitch_m, cam)
                 side = "LR"[cam]
-                row[f"visible_{side}"] = len(vr)
-                row[f"share_{side}"] = 100.0 * right_cells / max(len(vr), 1)
+                row[f"visible_{side}"] = visible
+                row[f"share_{side}"] = 100.0 * right_cells / max(visible, 1)
                 row[f"wrong_{side}"] = wrong
             out.append(row)
     return out
-
-
-def _image_steps(renderer: Renderer, pose: object, row: np.ndarray, col: np.ndarray,
-                 pitch_m: float, cam: int) -> np.ndarray:
-    """Smaller image distance (px) from each cell to its right and down neighbours."""
-    camera = renderer.rig.cameras[cam]
-
-    def project(r: np.ndarray, c: np.ndarray) -> np.ndarray:
-        obj = np.column_stack([c * pitch_m, r * pitch_m, np.zeros(len(r))])
-        return camera.project(obj @ pose.R.T + pose.t)  # type: ignore[attr-defined]
-
-    r, c = row.astype(float), col.astype(float)
-    here = project(r, c)
-    return np.minimum(np.linalg.norm(project(r + 1, c) - here, axis=1),
-                      np.linalg.norm(project(r, c + 1) - here, axis=1))
 
 
 def main() -> int:

@@ -135,6 +135,41 @@ def visible_cells(renderer: Renderer, pose: PlanePose, rows: int, cols: int, pit
     return r[inside], c[inside], uv[inside]
 
 
+def score_decoded_cells(renderer: Renderer, pose: PlanePose, glyphs: Any,
+                        shape: tuple[int, int], pitch_m: float, camera: int = 0,
+                        mirrored: bool = False) -> tuple[int, int, int]:
+    """Visible cells (:func:`visible_cells`), those decoded right, and wrong decoded cells.
+
+    ``glyphs``: the decoded :class:`~tactile_sl_decoder.glyphs.Glyphs` of that camera's
+    image.  A decoded glyph is right when its cell is visible and its centre lies within 0.3
+    of that cell's image spacing (the smaller step to its right or down neighbour) of the
+    cell's true projection, wrong when farther off; decoded cells that are not visible
+    (glyph partly outside the image) are not counted.
+    """
+    rows, cols = shape
+    vr, vc, vuv = visible_cells(renderer, pose, rows, cols, pitch_m, camera, mirrored)
+    cam = renderer.rig.cameras[camera]
+    sx = -1.0 if mirrored else 1.0
+
+    def project(r: np.ndarray, c: np.ndarray) -> np.ndarray:
+        obj = np.column_stack([sx * c * pitch_m, r * pitch_m, np.zeros(len(r))])
+        return cam.project(obj @ pose.R.T + pose.t)
+
+    r, c = vr.astype(float), vc.astype(float)
+    step = np.minimum(np.linalg.norm(project(r + 1, c) - vuv, axis=1),
+                      np.linalg.norm(project(r, c + 1) - vuv, axis=1))
+    slot = np.full((rows, cols), -1, np.int64)
+    slot[vr, vc] = np.arange(len(vr))
+    decoded = np.flatnonzero(np.asarray(glyphs.row) >= 0)
+    at = slot[np.asarray(glyphs.row)[decoded], np.asarray(glyphs.col)[decoded]]
+    seen = at >= 0
+    at, decoded = at[seen], decoded[seen]
+    off = np.hypot(np.asarray(glyphs.u)[decoded] - vuv[at, 0],
+                   np.asarray(glyphs.v)[decoded] - vuv[at, 1])
+    good = off <= 0.3 * step[at]
+    return len(vr), int(len(np.unique(at[good]))), int(np.count_nonzero(~good))
+
+
 def _albedo_sampler(artwork: Artwork, pose: PlanePose, mirrored: bool) -> Any:
     """albedo_fn(u, v) for render_plane: the artwork (frame units m), the card, the paper."""
     p = artwork.pitch_m
