@@ -248,7 +248,8 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
     if ox or oy:
         centroids += (ox, oy)
     # the typical area where each region lies (tilted views), and its largest value
-    ratio, search_area = _perspective_ratio(centroids, pixels, keep, ratio, typical, params)
+    ratio, search_area, scale_varies = _perspective_ratio(centroids, pixels, keep, ratio,
+                                                          typical, params)
     keep &= (ratio >= params.min_area_ratio) & (ratio <= params.max_area_ratio)
     single = np.flatnonzero(keep & (ratio < params.split_ratio))
     multi = np.flatnonzero(keep & (ratio >= params.split_ratio))
@@ -280,8 +281,7 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
     spacing, local = estimate_spacing(uu, vv, params.default_spacing_px,
                                       search_px=2.4 * np.sqrt(search_area))
     step: np.ndarray = local * np.float32(params.patch_span / params.patch_size)
-    step, local = _perspective_steps(uu, vv, step, local, search_area,
-                                     search_area != typical, params)
+    step, local = _perspective_steps(uu, vv, step, local, search_area, scale_varies, params)
     patches = sample_patches(gray, uu, vv, step, params.patch_size)
     if params.refine and ns:
         # binary centroids are quantised by the threshold; the grey-weighted centroid of the
@@ -324,26 +324,28 @@ def _patch_to_image(du: np.ndarray, dv: np.ndarray, step: np.ndarray
 
 def _perspective_ratio(centroids: np.ndarray, pixels: np.ndarray, keep: np.ndarray,
                        ratio: np.ndarray, typical: float, params: ExtractionParams
-                       ) -> tuple[np.ndarray, float]:
-    """Region areas over the typical glyph area *where they lie*, and its largest value.
+                       ) -> tuple[np.ndarray, float, bool]:
+    """Region areas over the typical glyph area where they lie; its largest value; if used.
 
     The field (:func:`.perspective.typical_area_field`) is fitted to the regions that pass
     the image-wide gates; it replaces the one typical area when its 5th-95th percentile
     range over them exceeds ``perspective_scale_range``.  Otherwise, and without
-    ``params.perspective``, (ratio, typical) as they came.
+    ``params.perspective``, (ratio, typical, False) as they came.  The largest value is
+    taken over the fitted regions only (the quadratic is not extrapolated to stray specks
+    beyond the pattern).
     """
     if not params.perspective:
-        return ratio, typical
+        return ratio, typical, False
     at = np.flatnonzero(keep & (ratio >= params.min_area_ratio)
                         & (ratio <= params.max_area_ratio))
     field = typical_area_field(centroids[at, 0], centroids[at, 1], pixels[at])
     if field is None:
-        return ratio, typical
+        return ratio, typical, False
     local = field(centroids[:, 0], centroids[:, 1])
     low, high = np.percentile(local[at], (5.0, 95.0))
     if high < params.perspective_scale_range * low:
-        return ratio, typical
-    return pixels / local, float(local[keep].max())
+        return ratio, typical, False
+    return pixels / local, float(local[at].max()), True
 
 
 def _perspective_steps(u: np.ndarray, v: np.ndarray, step: np.ndarray, local: np.ndarray,
@@ -354,8 +356,8 @@ def _perspective_steps(u: np.ndarray, v: np.ndarray, step: np.ndarray, local: np
     The frames (:func:`.perspective.lattice_frames`) replace the square patches when the
     scale varies (``scale_varies``) or the median frame is more anisotropic than
     ``perspective_anisotropy``; otherwise, and without ``params.perspective``, (step,
-    local) as they came.  The local spacing
-    becomes sqrt(det frame), the side of the square of the same area.
+    local) as they came.  The local spacing becomes sqrt(det frame), the side of the square
+    of the same area.
     """
     if not params.perspective or len(u) < 5:
         return step, local
