@@ -143,8 +143,9 @@ def score_decoded_cells(renderer: Renderer, pose: PlanePose, glyphs: Any,
     ``glyphs``: the decoded :class:`~tactile_sl_decoder.glyphs.Glyphs` of that camera's
     image.  A decoded glyph is right when its cell is visible and its centre lies within 0.3
     of that cell's image spacing (the smaller step to its right or down neighbour) of the
-    cell's true projection, wrong when farther off; decoded cells that are not visible
-    (glyph partly outside the image) are not counted.
+    cell's true projection, wrong when farther off (a wrong cell, or with a hiding card the
+    right cell of a glyph the card's edge cuts, whose ink centroid is off); decoded cells
+    that are not visible (glyph partly outside the image) are not counted.
     """
     rows, cols = shape
     vr, vc, vuv = visible_cells(renderer, pose, rows, cols, pitch_m, camera, mirrored)
