@@ -49,11 +49,11 @@ class GridParams:
     match_tol: float = 0.33         # max distance from prediction to candidate (x local spacing)
     smooth_iterations: int = 1      # passes of local-vector smoothing over the 4-neighbourhood
     local_gates: bool = False
-    """Length gates and fallback vectors relative to each glyph's own spacing (median
-    nearest-neighbour distance over it and its four nearest glyphs) instead of the image's
-    median, and k-NN without a distance cap: a view whose glyph spacing varies 2-4 fold
-    across the image (a target tilted 40 deg close to the cameras; the calibration's
-    decoder turns it on, docs/calibration.md)."""
+    """Length gates and fallback vectors relative to each glyph's own short and long lattice
+    steps (:func:`_local_spacings`) instead of the image's median spacing, and k-NN without
+    a distance cap: a view whose glyph spacing varies 2-4 fold across the image (a target
+    tilted 40 deg close to the cameras; the calibration's decoder turns it on,
+    docs/calibration.md)."""
 
 
 @dataclass
