@@ -139,3 +139,40 @@ def test_a_view_that_decodes_nothing_says_why(scene):
     report = cal.report()
     assert "view blank" in report and "no glyph found" in report
     assert "view far" in report and "median spacing of" in report and "too far" in report
+
+
+def _tilted_lattice(rows=26, cols=28, tilt_deg=40.0, distance_m=0.013, pitch_m=0.0005,
+                    focal_px=540.0):
+    """Glyph centres of a flat lattice tilted about the image's vertical axis, seen by a
+    pinhole camera (u = f X / Z + cx, v = f Y / Z + cy): spacing 6-30 px in one image."""
+    r, c = (a.ravel() for a in np.mgrid[0:rows, 0:cols])
+    x = (c - (cols - 1) / 2.0) * pitch_m
+    y = (r - (rows - 1) / 2.0) * pitch_m
+    t = np.radians(tilt_deg)
+    xc, zc = x * np.cos(t), distance_m - x * np.sin(t)
+    return focal_px * xc / zc + 320.0, focal_px * y / zc + 240.0, r, c
+
+
+def test_local_gates_link_a_lattice_whose_spacing_varies_several_fold():
+    from tactile_sl_decoder.decode.grid import GridParams, build_grid, nearest_neighbours
+    u, v, r, c = _tilted_lattice()
+    steps = np.hypot(np.diff(u), np.diff(v))[np.diff(c) == 1]
+    assert steps.max() > 3.5 * steps.min()
+    index = {(a, b): i for i, (a, b) in enumerate(zip(r, c))}
+    truth = np.array([index.get((a, b + 1), -1) for a, b in zip(r, c)])
+    down = np.array([index.get((a + 1, b), -1) for a, b in zip(r, c)])
+    found = {}
+    for local in (False, True):
+        p = GridParams(local_gates=local)
+        spacing = float(np.median(np.hypot(np.diff(u), np.diff(v))))
+        grid = build_grid(u, v, p, neighbours=nearest_neighbours(
+            u, v, p.k_neighbours, 0.0 if local else spacing))
+        right_links = grid.neighbour(0, 1)
+        down_links = grid.neighbour(1, 0)
+        has = truth >= 0
+        assert not ((right_links >= 0) & (right_links != truth)).any()   # never a wrong link
+        assert not ((down_links >= 0) & (down_links != down)).any()
+        found[local] = (np.mean(right_links[has] == truth[has]),
+                        np.mean(down_links[down >= 0] == down[down >= 0]))
+    assert min(found[True]) >= 0.95, found
+    assert min(found[False]) < 0.9, found        # the image-wide gates miss the ends
