@@ -117,19 +117,22 @@ def _local_spacings(dist: np.ndarray, idx: np.ndarray, valid: np.ndarray
 
 
 def _best_four(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.ndarray,
-               col_dir: np.ndarray, row_dir: np.ndarray, short: float | np.ndarray,
-               long: float | np.ndarray, p: GridParams) -> list[tuple[np.ndarray, np.ndarray]]:
+               col_dir: np.ndarray, row_dir: np.ndarray, spacing: float | np.ndarray,
+               p: GridParams, long_spacing: float | np.ndarray | None = None
+               ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per glyph, the shortest neighbour step within angle/length gates of +-col, +-row.
 
-    The gates are ``init_min_len`` x ``short`` and ``init_max_len`` x ``long``: the image's
-    spacing (floats) or each glyph's short and long lattice steps ((N, 1) arrays).
+    The gates are ``init_min_len`` x ``spacing`` and ``init_max_len`` x ``long_spacing``
+    (default ``spacing``): the image's spacing (a float) or each glyph's short and long
+    lattice steps ((N, 1) arrays).
 
     Four (found (N,) bool, flat index into the (N, K) candidate arrays) pairs, for +col,
     -col, +row, -row.  Candidates come sorted by distance, so the shortest one within the
     gates is the first one.
     """
     n, kk = dist.shape
-    gate = valid & (dist > p.init_min_len * short) & (dist < p.init_max_len * long)
+    long = spacing if long_spacing is None else long_spacing
+    gate = valid & (dist > p.init_min_len * spacing) & (dist < p.init_max_len * long)
     td = np.cos(np.radians(p.init_angle_deg)) * dist      # cos(angle) > t  <=>  dot > t |d|
     base = np.arange(n) * kk
     out = []
@@ -236,7 +239,7 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
         short, long = _local_spacings(dist, idx, valid)
 
     # Local lattice vectors, following stretching: the best-aligned neighbour each way.
-    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, short, long, p)
+    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, short, p, long)
     fallback = spacing if not p.local_gates else np.sqrt(short * long)
     col_vec = _combine(du, dv, steps[0], steps[1], col_dir * fallback)
     row_vec = _combine(du, dv, steps[2], steps[3], row_dir * fallback)
