@@ -88,6 +88,89 @@ def random_poses(count: int, artwork: Artwork, seed: int = 0,
     return poses
 
 
+def tilted_pose(artwork: Artwork, axis: str, tilt_deg: float, distance_m: float = 0.016,
+                rig_distance_m: float = 0.015) -> PlanePose:
+    """The whole artwork tilted ``tilt_deg`` about the pad frame's x or y axis (``axis``).
+
+    The pattern's centre sits ``distance_m`` in front of the cameras' plane, on the rig's
+    axis: tilted about x, rows foreshorten (the near end is at the image top or bottom);
+    about y, columns do.
+    """
+    if axis not in ("x", "y"):
+        raise ValueError(f"axis must be 'x' or 'y', got {axis!r}")
+    p = artwork.pitch_m
+    centre = np.array([(artwork.cols - 1) * p / 2, (artwork.rows - 1) * p / 2, 0.0])
+    direction = np.array([1.0, 0.0, 0.0]) if axis == "x" else np.array([0.0, 1.0, 0.0])
+    R = cv2.Rodrigues(np.radians(tilt_deg) * direction)[0]
+    position = np.array([0.0, 0.0, distance_m - rig_distance_m])
+    return PlanePose(R, position - R @ centre)
+
+
+def visible_cells(renderer: Renderer, pose: PlanePose, rows: int, cols: int, pitch_m: float,
+                  camera: int = 0, mirrored: bool = False, hidden: np.ndarray | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cells whose whole glyph lies inside one camera's image: row, col, true (u, v) px.
+
+    A cell counts when its centre projects at least half its own image spacing (the
+    distance to the projection of its right or down neighbour, whichever is larger) inside
+    the image, so that its glyph does not touch the border (extraction drops those), and
+    the cell is not hidden by the card (``hidden``: (rows, cols) bool, optional).
+    """
+    cam = renderer.rig.cameras[camera]
+    sx = -1.0 if mirrored else 1.0
+    r, c = (a.reshape(-1) for a in np.mgrid[0:rows, 0:cols])
+
+    def project(rr: np.ndarray, cc: np.ndarray) -> np.ndarray:
+        obj = np.column_stack([sx * cc * pitch_m, rr * pitch_m, np.zeros(len(rr))])
+        return cam.project(obj @ pose.R.T + pose.t)
+
+    uv = project(r.astype(float), c.astype(float))
+    step = np.maximum(np.linalg.norm(project(r + 1.0, c.astype(float)) - uv, axis=1),
+                      np.linalg.norm(project(r.astype(float), c + 1.0) - uv, axis=1))
+    margin = 0.5 * step
+    inside = ((uv[:, 0] >= margin) & (uv[:, 0] <= cam.width - 1 - margin)
+              & (uv[:, 1] >= margin) & (uv[:, 1] <= cam.height - 1 - margin))
+    if hidden is not None:
+        inside &= ~np.asarray(hidden, bool).reshape(-1)
+    return r[inside], c[inside], uv[inside]
+
+
+def score_decoded_cells(renderer: Renderer, pose: PlanePose, glyphs: Any,
+                        shape: tuple[int, int], pitch_m: float, camera: int = 0,
+                        mirrored: bool = False) -> tuple[int, int, int]:
+    """Visible cells (:func:`visible_cells`), those decoded right, and wrong decoded cells.
+
+    ``glyphs``: the decoded :class:`~tactile_sl_decoder.glyphs.Glyphs` of that camera's
+    image.  A decoded glyph is right when its cell is visible and its centre lies within 0.3
+    of that cell's image spacing (the smaller step to its right or down neighbour) of the
+    cell's true projection, wrong when farther off (a wrong cell, or with a hiding card the
+    right cell of a glyph the card's edge cuts, whose ink centroid is off); decoded cells
+    that are not visible (glyph partly outside the image) are not counted.
+    """
+    rows, cols = shape
+    vr, vc, vuv = visible_cells(renderer, pose, rows, cols, pitch_m, camera, mirrored)
+    cam = renderer.rig.cameras[camera]
+    sx = -1.0 if mirrored else 1.0
+
+    def project(r: np.ndarray, c: np.ndarray) -> np.ndarray:
+        obj = np.column_stack([sx * c * pitch_m, r * pitch_m, np.zeros(len(r))])
+        return cam.project(obj @ pose.R.T + pose.t)
+
+    r, c = vr.astype(float), vc.astype(float)
+    step = np.minimum(np.linalg.norm(project(r + 1, c) - vuv, axis=1),
+                      np.linalg.norm(project(r, c + 1) - vuv, axis=1))
+    slot = np.full((rows, cols), -1, np.int64)
+    slot[vr, vc] = np.arange(len(vr))
+    decoded = np.flatnonzero(np.asarray(glyphs.row) >= 0)
+    at = slot[np.asarray(glyphs.row)[decoded], np.asarray(glyphs.col)[decoded]]
+    seen = at >= 0
+    at, decoded = at[seen], decoded[seen]
+    off = np.hypot(np.asarray(glyphs.u)[decoded] - vuv[at, 0],
+                   np.asarray(glyphs.v)[decoded] - vuv[at, 1])
+    good = off <= 0.3 * step[at]
+    return len(vr), int(len(np.unique(at[good]))), int(np.count_nonzero(~good))
+
+
 def _albedo_sampler(artwork: Artwork, pose: PlanePose, mirrored: bool) -> Any:
     """albedo_fn(u, v) for render_plane: the artwork (frame units m), the card, the paper."""
     p = artwork.pitch_m

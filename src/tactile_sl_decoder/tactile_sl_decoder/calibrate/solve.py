@@ -228,7 +228,8 @@ def _usable_views(views: list[StereoView], target: PatternTarget, opts: Calibrat
             cam: CameraView = getattr(v, side)
             if len(cam) < opts.min_cells:
                 reasons.setdefault(i, []).append(
-                    f"{side}: {len(cam)} cells decoded (< {opts.min_cells})")
+                    f"{side}: {len(cam)} cells decoded (< {opts.min_cells}): "
+                    f"{cam.why_few_cells()}")
                 continue
             inl = _plane_inliers(cam, target, opts)
             ratio = float(inl.mean()) if inl is not None else 0.0

@@ -15,6 +15,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from tactile_sl_decoder.contract import LABEL_UNKNOWN
+from tactile_sl_decoder.extract.extraction import ExtractionParams
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 
@@ -55,6 +57,13 @@ class PatternTarget:
         return np.asarray(row, np.int64) * self.shape[1] + np.asarray(col, np.int64)
 
 
+MIN_GLYPHS_FOR_A_VIEW = 30
+"""Fewer glyph candidates than this: the pattern is mostly not in the image."""
+MIN_DECODABLE_SPACING_PX = 6.0
+"""Median glyph spacing below which glyphs are too small to decode (simulated flat views:
+every cell decodes at 6.5 px, none at 5 px)."""
+
+
 @dataclass
 class CameraView:
     """Cells decoded in one image: cell (row, col) and its image point (u, v) in pixels."""
@@ -64,14 +73,34 @@ class CameraView:
     uv: np.ndarray                  # (N, 2) float64, raw pixels
     glyphs: int = 0                 # glyph candidates the extractor found
     spacing_px: float = 0.0         # median glyph spacing in the image
+    labelled: int = 0               # glyphs the classifier gave a confident label
 
     @classmethod
     def from_glyphs(cls, g: Glyphs) -> "CameraView":
         """The decoded glyphs of one image (undecoded ones are left out)."""
         m = g.row >= 0
         uv = np.column_stack([g.u[m], g.v[m]]).astype(np.float64)
+        labelled = int(np.count_nonzero(np.asarray(g.label) != LABEL_UNKNOWN))
         return cls(g.row[m].astype(np.int32), g.col[m].astype(np.int32), uv, len(g),
-                   float(g.spacing_px))
+                   float(g.spacing_px), labelled)
+
+    def why_few_cells(self) -> str:
+        """Why this image decoded few cells, from what each stage found (report text)."""
+        if self.glyphs == 0:
+            return "no glyph found (pattern out of view, blank, dark or saturated image?)"
+        if self.glyphs < MIN_GLYPHS_FOR_A_VIEW:
+            return (f"only {self.glyphs} glyph candidates (pattern mostly out of view or "
+                    "hidden?)")
+        if self.spacing_px < MIN_DECODABLE_SPACING_PX:
+            return (f"{self.glyphs} glyphs at a median spacing of {self.spacing_px:.1f} px: "
+                    f"too far or too oblique (glyphs decode from about "
+                    f"{MIN_DECODABLE_SPACING_PX:.0f} px)")
+        if self.labelled < 0.5 * self.glyphs:
+            return (f"{self.labelled} of {self.glyphs} glyphs classified (out of focus, "
+                    "blurred, too oblique, or not this pattern's glyphs?)")
+        return (f"{self.glyphs} glyphs, {self.labelled} classified, but no codeword window "
+                "decoded (another pattern, a wrong mirrored setting, or tilted beyond about "
+                "45 deg?)")
 
     def __len__(self) -> int:
         return int(len(self.row))
@@ -91,9 +120,18 @@ class ViewDecoder:
     """Decodes stereo views of the pattern with the decoder's pipeline (one image at a time)."""
 
     def __init__(self, target: PatternTarget, classifier: Any = None,
-                 params: PipelineParams | None = None) -> None:
+                 params: PipelineParams | None = None, tilted: bool = True) -> None:
+        """A decoder for calibration views of ``target``.
+
+        ``tilted``: decode strongly tilted views too (perspective extraction and local
+        lattice gates, docs/calibration.md); False decodes as the sensor's pipeline does.
+        """
         params = params or PipelineParams(threads=1)
         params.decode.mirrored = bool(target.mirrored)
+        if tilted:
+            params.extraction = params.extraction or ExtractionParams()
+            params.extraction.perspective = True
+            params.grid.local_gates = True
         self.target = target
         self.pipeline = StereoPipeline(target.pattern, classifier, params)
 

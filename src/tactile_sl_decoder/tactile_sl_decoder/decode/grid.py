@@ -24,6 +24,7 @@ Method (fully vectorised, one k-d tree):
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +48,12 @@ class GridParams:
     init_max_len: float = 1.8
     match_tol: float = 0.33         # max distance from prediction to candidate (x local spacing)
     smooth_iterations: int = 1      # passes of local-vector smoothing over the 4-neighbourhood
+    local_gates: bool = False
+    """Length gates and fallback vectors relative to each glyph's own short and long lattice
+    steps (:func:`_local_spacings`) instead of the image's median spacing, and k-NN without
+    a distance cap: a view whose glyph spacing varies 2-4 fold across the image (a target
+    tilted 40 deg close to the cameras; the calibration's decoder turns it on,
+    docs/calibration.md)."""
 
 
 @dataclass
@@ -87,17 +94,45 @@ def _global_frame(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, spacing: flo
     return np.array([np.cos(phi), np.sin(phi)])
 
 
+def _local_spacings(dist: np.ndarray, idx: np.ndarray, valid: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 1) local short and long lattice steps of every glyph.
+
+    The medians, over the glyph and its four nearest glyphs, of the distance to the nearest
+    and to the third nearest glyph: on a lattice foreshortened along one axis (steps a < b)
+    the neighbours come a, a, b, b, so these are a and b; both are s on a square lattice.
+    """
+    n = len(dist)
+    own = np.arange(n)[:, None]
+    near = np.where(valid[:, :4], idx[:, :4], own)
+    out = []
+    for k in (0, 2):
+        d = np.where(np.isfinite(dist[:, k]), dist[:, k], np.nan)
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)   # all-nan rows: fallback
+            local = np.nanmedian(np.column_stack([d, d[near]]), axis=1)
+            fallback = float(np.nanmedian(d)) if np.isfinite(d).any() else 0.0
+        out.append(np.where(np.isfinite(local), local, fallback)[:, None])
+    return out[0], np.maximum(out[1], out[0])
+
+
 def _best_four(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.ndarray,
-               col_dir: np.ndarray, row_dir: np.ndarray, spacing: float, p: GridParams
+               col_dir: np.ndarray, row_dir: np.ndarray, spacing: float | np.ndarray,
+               p: GridParams, long_spacing: float | np.ndarray | None = None
                ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per glyph, the shortest neighbour step within angle/length gates of +-col, +-row.
+
+    The gates are ``init_min_len`` x ``spacing`` and ``init_max_len`` x ``long_spacing``
+    (default ``spacing``): the image's spacing (a float) or each glyph's short and long
+    lattice steps ((N, 1) arrays).
 
     Four (found (N,) bool, flat index into the (N, K) candidate arrays) pairs, for +col,
     -col, +row, -row.  Candidates come sorted by distance, so the shortest one within the
     gates is the first one.
     """
     n, kk = dist.shape
-    gate = valid & (dist > p.init_min_len * spacing) & (dist < p.init_max_len * spacing)
+    long = spacing if long_spacing is None else long_spacing
+    gate = valid & (dist > p.init_min_len * spacing) & (dist < p.init_max_len * long)
     td = np.cos(np.radians(p.init_angle_deg)) * dist      # cos(angle) > t  <=>  dot > t |d|
     base = np.arange(n) * kk
     out = []
@@ -198,11 +233,16 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     step = max(1, n // 400)                           # a few hundred glyphs are plenty
     col_dir = _global_frame(du[::step, :4], dv[::step, :4], dist[::step, :4], spacing)
     row_dir = np.array([-col_dir[1], col_dir[0]])     # +v side of the column direction
+    short: float | np.ndarray = spacing
+    long: float | np.ndarray = spacing
+    if p.local_gates:
+        short, long = _local_spacings(dist, idx, valid)
 
     # Local lattice vectors, following stretching: the best-aligned neighbour each way.
-    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, spacing, p)
-    col_vec = _combine(du, dv, steps[0], steps[1], col_dir * spacing)
-    row_vec = _combine(du, dv, steps[2], steps[3], row_dir * spacing)
+    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, short, p, long)
+    fallback = spacing if not p.local_gates else np.sqrt(short * long)
+    col_vec = _combine(du, dv, steps[0], steps[1], col_dir * fallback)
+    row_vec = _combine(du, dv, steps[2], steps[3], row_dir * fallback)
     flat_idx = idx.reshape(-1)
     nbr4 = np.column_stack([np.where(found, flat_idx[at], -1) for found, at in steps])
     # Smooth them over the 4-neighbourhood (a median: one wrong link does not matter).

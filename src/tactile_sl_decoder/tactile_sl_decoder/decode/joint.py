@@ -21,7 +21,9 @@ from tactile_sl_decoder.glyphs import Glyphs
 
 def glyph_neighbours(g: Glyphs, params: GridParams) -> tuple[np.ndarray, np.ndarray]:
     """k-NN table of one image's glyphs (the lattice search's first step)."""
-    return nearest_neighbours(g.u, g.v, params.k_neighbours, g.spacing_px)
+    # local gates: spacings that vary several fold, so no cap of 3 median spacings
+    return nearest_neighbours(g.u, g.v, params.k_neighbours,
+                              0.0 if params.local_gates else g.spacing_px)
 
 
 def decode_jointly(images: Sequence[Glyphs], decoder: CodewordDecoder, params: GridParams,

@@ -149,7 +149,8 @@ def closing_background(gray: np.ndarray, u: np.ndarray, v: np.ndarray, step: np.
 
     def patches_at(idx: np.ndarray) -> np.ndarray:
         pu, pv, ps = u[idx], v[idx], step[idx]
-        half = ps * (size / 2.0) + 2.0
+        reach = np.abs(ps).sum(axis=2).max(axis=1) if ps.ndim == 3 else ps
+        half = reach * (size / 2.0) + 2.0
         h, w = gray.shape
         x0 = max(0, int(np.floor(np.min(pu - half))) - side)
         y0 = max(0, int(np.floor(np.min(pv - half))) - side)

@@ -27,6 +27,7 @@ from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import PATCH_SIZE
 from tactile_sl_decoder.extract.centroid import closing_background, patch_centroid_offset
 from tactile_sl_decoder.extract.patches import sample_patches
+from tactile_sl_decoder.extract.perspective import anisotropy, lattice_frames, typical_area_field
 from tactile_sl_decoder.extract.spacing import estimate_spacing, median
 
 
@@ -117,6 +118,19 @@ class ExtractionParams:
     """Inside those regions, split the parts that are still linked (glyphs joined by the
     stripes of a striped object seen through the pad) by Otsu's threshold of each part's
     ink ratio: the printed ink is darker than anything seen through the pad."""
+    perspective: bool = False
+    """Follow a glyph scale and lattice shape that vary strongly across the image (a target
+    tilted by 30-40 deg close to the cameras; :mod:`.perspective`): region areas are judged
+    against a typical area fitted as a smooth function of the position, and patches are
+    resampled through each glyph's local lattice frame (de-skewed, anisotropic scale).
+    Engages only past the two thresholds below; the calibration's decoder turns it on
+    (docs/calibration.md), the sensor's pipeline leaves it off."""
+    perspective_scale_range: float = 1.5
+    """The typical area must vary by more than this factor (5th to 95th percentile over the
+    glyphs) for the area gates to follow it ..."""
+    perspective_anisotropy: float = 1.12
+    """... and the median lattice frame be more anisotropic than this (ratio of its
+    singular values), or the scale vary as above, for the patches to follow the frames."""
 
     def validate(self) -> "ExtractionParams":
         """Raise ValueError naming the first setting outside :data:`EXTRACTION_SETTINGS`."""
@@ -138,6 +152,7 @@ EXTRACTION_SETTINGS = SettingsTable(ExtractionParams, ranges={
     "large_offset": (-255.0, 255.0), "refine_split": (0, 5),
     "split_centroid_radius": (0.05, 0.5), "centroid_level": (0.0, 1.0),
     "centroid_plane_misfit": (0.0, 10.0), "centroid_background_step": (0.0, 10.0),
+    "perspective_scale_range": (1.0, 100.0), "perspective_anisotropy": (1.0, 100.0),
 }, read_only=("patch_size",), checks={"block_size": _odd})
 """Every field is a node parameter (``symbol_extractor``: bare, ``decoder``:
 ``extraction.<field>``); ``patch_size`` is the classifier's input size, set at start only."""
@@ -230,12 +245,15 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
         return Detections.empty(params.patch_size)
     typical = median(pixels[keep])
     ratio = pixels / typical
+    if ox or oy:
+        centroids += (ox, oy)
+    # the typical area where each region lies (tilted views), and its largest value
+    ratio, search_area, scale_varies = _perspective_ratio(centroids, pixels, keep, ratio,
+                                                          typical, params)
     keep &= (ratio >= params.min_area_ratio) & (ratio <= params.max_area_ratio)
     single = np.flatnonzero(keep & (ratio < params.split_ratio))
     multi = np.flatnonzero(keep & (ratio >= params.split_ratio))
     ns = len(single)
-    if ox or oy:
-        centroids += (ox, oy)
     extra = np.zeros((0, 3))
     linked = np.zeros((0, 3))    # glyphs found in linked parts of large regions
     if params.rethreshold_large:
@@ -261,8 +279,9 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
                   for i, first in enumerate((centroids[single, 0], centroids[single, 1],
                                              pixels[single])))
     spacing, local = estimate_spacing(uu, vv, params.default_spacing_px,
-                                      search_px=2.4 * np.sqrt(typical))
-    step = local * np.float32(params.patch_span / params.patch_size)
+                                      search_px=2.4 * np.sqrt(search_area))
+    step: np.ndarray = local * np.float32(params.patch_span / params.patch_size)
+    step, local = _perspective_steps(uu, vv, step, local, search_area, scale_varies, params)
     patches = sample_patches(gray, uu, vv, step, params.patch_size)
     if params.refine and ns:
         # binary centroids are quantised by the threshold; the grey-weighted centroid of the
@@ -275,8 +294,9 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
                                        tolerance=params.centroid_plane_misfit,
                                        background=back,
                                        background_step=params.centroid_background_step)
-        uu[:ns] += du * step[:ns]
-        vv[:ns] += dv * step[:ns]
+        du, dv = _patch_to_image(du, dv, step[:ns])
+        uu[:ns] += du
+        vv[:ns] += dv
     if params.refine and params.refine_split > 0 and len(uu) > ns:
         cut = slice(ns, len(uu))   # glyphs split out of linked regions or linked parts
         sub = patches[cut]
@@ -285,11 +305,67 @@ def extract_symbols(gray: np.ndarray, params: ExtractionParams | None = None) ->
                                            params.split_centroid_radius,
                                            params.centroid_flatten, params.centroid_level,
                                            params.centroid_plane_misfit)
-            uu[cut] += du * step[cut]
-            vv[cut] += dv * step[cut]
+            du, dv = _patch_to_image(du, dv, step[cut])
+            uu[cut] += du
+            vv[cut] += dv
             sub = sample_patches(gray, uu[cut], vv[cut], step[cut], params.patch_size)
         patches[cut] = sub                 # the classifier sees them centred
     return Detections(uu, vv, aa, spacing, patches, local)
+
+
+def _patch_to_image(du: np.ndarray, dv: np.ndarray, step: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """A shift in patch pixels as a shift in image pixels (square or affine patches)."""
+    if step.ndim == 1:
+        return du * step, dv * step
+    return ((step[:, 0, 0] * du + step[:, 0, 1] * dv).astype(np.float32),
+            (step[:, 1, 0] * du + step[:, 1, 1] * dv).astype(np.float32))
+
+
+def _perspective_ratio(centroids: np.ndarray, pixels: np.ndarray, keep: np.ndarray,
+                       ratio: np.ndarray, typical: float, params: ExtractionParams
+                       ) -> tuple[np.ndarray, float, bool]:
+    """Region areas over the typical glyph area where they lie; its largest value; if used.
+
+    The field (:func:`.perspective.typical_area_field`) is fitted to the regions that pass
+    the image-wide gates; it replaces the one typical area when its 5th-95th percentile
+    range over them exceeds ``perspective_scale_range``.  Otherwise, and without
+    ``params.perspective``, (ratio, typical, False) as they came.  The largest value is
+    taken over the fitted regions only (the quadratic is not extrapolated to stray specks
+    beyond the pattern).
+    """
+    if not params.perspective:
+        return ratio, typical, False
+    at = np.flatnonzero(keep & (ratio >= params.min_area_ratio)
+                        & (ratio <= params.max_area_ratio))
+    field = typical_area_field(centroids[at, 0], centroids[at, 1], pixels[at])
+    if field is None:
+        return ratio, typical, False
+    local = field(centroids[:, 0], centroids[:, 1])
+    low, high = np.percentile(local[at], (5.0, 95.0))
+    if high < params.perspective_scale_range * low:
+        return ratio, typical, False
+    return pixels / local, float(local[at].max()), True
+
+
+def _perspective_steps(u: np.ndarray, v: np.ndarray, step: np.ndarray, local: np.ndarray,
+                       largest_area: float, scale_varies: bool, params: ExtractionParams
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Patch steps through the local lattice frames, (N, 2, 2), and the local spacings.
+
+    The frames (:func:`.perspective.lattice_frames`) replace the square patches when the
+    scale varies (``scale_varies``) or the median frame is more anisotropic than
+    ``perspective_anisotropy``; otherwise, and without ``params.perspective``, (step,
+    local) as they came.  The local spacing becomes sqrt(det frame), the side of the square
+    of the same area.
+    """
+    if not params.perspective or len(u) < 5:
+        return step, local
+    frames = lattice_frames(u, v, 2.4 * math.sqrt(largest_area))
+    if not scale_varies and median(anisotropy(frames)) < params.perspective_anisotropy:
+        return step, local
+    return (frames * np.float32(params.patch_span / params.patch_size),
+            np.sqrt(np.abs(np.linalg.det(frames))).astype(np.float32))
 
 
 def _glyphs_in_large_regions(roi: np.ndarray, gray: np.ndarray, ox: int, oy: int,
