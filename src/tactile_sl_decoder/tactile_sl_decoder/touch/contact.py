@@ -16,6 +16,7 @@ from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.jit import helper, kernel
 from tactile_sl_decoder.touch.support import (
     SupportRegions,
+    cholesky_solve,
     nearest_seed_label,
     support_regions,
 )
@@ -177,36 +178,6 @@ def _kept_cell(z: np.ndarray, r: int, c: int, limit: float) -> bool:
 
 
 @helper
-def _solve6(a: np.ndarray, b: np.ndarray) -> bool:
-    """Solve a x = b in place (b <- x) for a 6x6 symmetric positive definite a (Cholesky)."""
-    n = 6
-    for j in range(n):
-        d = a[j, j]
-        for k in range(j):
-            d -= a[j, k] * a[j, k]
-        if d <= 0.0:
-            return False
-        d = np.sqrt(d)
-        a[j, j] = d
-        for i in range(j + 1, n):
-            s = a[i, j]
-            for k in range(j):
-                s -= a[i, k] * a[j, k]
-            a[i, j] = s / d
-    for i in range(n):
-        s = b[i]
-        for k in range(i):
-            s -= a[i, k] * b[k]
-        b[i] = s / a[i, i]
-    for i in range(n - 1, -1, -1):
-        s = b[i]
-        for k in range(i + 1, n):
-            s -= a[k, i] * b[k]
-        b[i] = s / a[i, i]
-    return True
-
-
-@helper
 def _deepest(z: np.ndarray, count: int) -> tuple[np.ndarray, float]:
     """The ``count`` deepest decoded cells and the deepest value.
 
@@ -252,7 +223,7 @@ def _fit(z: np.ndarray, r: int, c: int, limit: float, coef: np.ndarray,
             coef[a] += _DESIGN[j, a] * z[rr, cc]
             for b in range(6):
                 normal[a, b] += _DESIGN[j, a] * _DESIGN[j, b]
-    if count < 7 or not _solve6(normal, coef):
+    if count < 7 or not cholesky_solve(normal, coef):
         return -1.0
     ss = 0.0
     for j in range(9):

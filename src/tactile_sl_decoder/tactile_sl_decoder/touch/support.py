@@ -308,7 +308,7 @@ def _edge_ring(clear: np.ndarray, rows: np.ndarray, cols: np.ndarray, grid_rows:
 
 
 @helper
-def _cholesky_solve(a: np.ndarray, b: np.ndarray) -> bool:
+def cholesky_solve(a: np.ndarray, b: np.ndarray) -> bool:
     """Solve a x = b in place (b <- x, a overwritten) for a symmetric positive definite a.
 
     Cholesky a = L L^T (Golub and Van Loan, Matrix Computations, 4th ed., alg. 4.2.1), from
@@ -405,7 +405,7 @@ def constrained_edge(free: np.ndarray, clear: np.ndarray, rows: np.ndarray, cols
             for i in range(h):
                 block[i, j] = row[ring[at[i]]]
         nu = -free_ring[at]
-        if not _cholesky_solve(block, nu):    # not positive definite (rounding): plain LU
+        if not cholesky_solve(block, nu):    # not positive definite (rounding): plain LU
             nu = np.linalg.solve(_transposed_block(inverse, ring, at), -free_ring[at])
         if np.any(nu < 0.0):                  # its multiplier pulls: let that cell go
             held[at[nu < 0.0]] = False
