@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_sl_common.heap import freeze_long_lived
 from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry, label_glyphs
 from tactile_sl_decoder.classify.classifier import Classifier
 from tactile_sl_decoder.cpu_threads import set_cpu_threads
@@ -106,6 +107,8 @@ def _serve(conn: Connection, weights: str | None, threshold: float | None,
     carry = LabelCarry(CarryParams())
     camera: Any = None
     buffers = _Buffers()
+    freeze_long_lived()        # no full collection of the imports between two frames
+    frames = 0
     try:
         while True:
             try:
@@ -122,6 +125,9 @@ def _serve(conn: Connection, weights: str | None, threshold: float | None,
                 job, image_name, result_name = payload
                 conn.send(_answer(job, buffers.get(image_name), buffers.get(result_name),
                                   camera, classifier, carry))
+                frames += 1
+                if frames == 1:        # and what the first frame set up (compiled kernels)
+                    freeze_long_lived(collect=False)
     finally:
         buffers.close()
 

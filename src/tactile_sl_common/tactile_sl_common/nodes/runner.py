@@ -5,7 +5,9 @@ weights file ends every node the same way: a FATAL log line naming the problem a
 status 1, never a traceback.  Ctrl-C and SIGTERM, at any moment (during start-up, in the
 middle of a frame, at the end of a replay), end it quietly with status 0: the signal only
 sets a flag (:mod:`.stop`), the current callback finishes, the node's threads are joined in
-its ``destroy_node`` and only then is rclpy shut down.
+its ``destroy_node`` and only then is rclpy shut down.  Once the node is made, everything
+start-up left is frozen out of the garbage collector's reach (:mod:`tactile_sl_common.heap`:
+no full collection of tens of milliseconds between two frames).
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ try:
 except ImportError:   # an rclpy without it: the classic executor
     EventsExecutor = None  # type: ignore[assignment]  # checked where used
 
+from tactile_sl_common.heap import freeze_long_lived
 from tactile_sl_common.nodes import stop
 
 ConfigurationErrors = tuple[type[BaseException], ...]
@@ -65,6 +68,7 @@ def run_node(make_node: Callable[[], NodeT], name: str,
         if not stop.requested():
             node = make_node()
             executor.add_node(node)
+            freeze_long_lived()     # start-up's objects: out of every later collection
             while (not stop.requested() and rclpy.ok()
                    and not (finished is not None and finished(node))):
                 executor.spin_once(timeout_sec=0.1)

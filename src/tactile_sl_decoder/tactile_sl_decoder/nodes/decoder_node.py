@@ -28,6 +28,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from tactile_sl_common.clouds import cloud_fields
+from tactile_sl_common.heap import freeze_long_lived
 from tactile_sl_common.images import ImageFormatError, to_gray
 from tactile_sl_common.nodes.messages import cloud_msg
 from tactile_sl_common.nodes.parameters import LiveParameters, declare_qos
@@ -101,6 +102,7 @@ class DecoderNode(Node):
         self.stats = {"frames": 0, "skipped": 0, "dropped": 0, "points": 0, "left": 0,
                       "right": 0}
         self._proc_ms: list[float] = []
+        self._heap_frozen = False
 
         inputs = declare_qos(self.live, "input", "the image (or symbols) and camera_info "
                              "subscriptions (depth: input_depth)", s.input_depth,
@@ -304,6 +306,8 @@ class DecoderNode(Node):
                     self.pub_sym[side].publish(make_symbol_array(glyphs, src.header,
                                                                  self.settings.publish_patches))
         proc_s = time.perf_counter() - t0
+        if not self._heap_frozen:     # what the first frame set up lives as long as the node
+            self._heap_frozen = freeze_long_lived(collect=False) > 0
         self._proc_ms.append(1e3 * proc_s)
         latency_s = (self.get_clock().now().nanoseconds - stamp_ns(left_msg.header)) * 1e-9
         self.diag.frame(proc_s, latency_s, result.left, result.right, len(result.points),
