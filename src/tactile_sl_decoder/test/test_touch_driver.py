@@ -74,6 +74,12 @@ def test_a_restart_keeps_the_sensor_and_the_live_settings():
     driver.frame(_points(_displacement(SENSOR.elastomer, [], 2e-6, np.random.default_rng(3))))
     assert driver.ready
     params.contact.force_on = 0.05             # a live change, written into the params
+
+    def nobody_listens() -> bool:
+        return False
+
+    driver.stage.slip_wanted = nobody_listens  # what a node sets
     driver.restart(mirrored=True)
     assert not driver.ready and driver.stage.mirrored
     assert driver.stage.params is params and driver.stage.sensor is SENSOR
+    assert driver.stage.slip_wanted is nobody_listens

@@ -187,3 +187,20 @@ def test_markers_follow_the_state():
 def test_bad_settings_are_refused(kwargs, message):
     with pytest.raises(ValueError, match=message):
         SlipParams(**kwargs).validate()
+
+
+def test_slip_only_when_wanted_and_the_same_when_it_is(stages) -> None:
+    """A node asks for slip only while something subscribes; the estimate has no history,
+    so a frame estimated after frames that were not is the same as one always estimated."""
+    stage = stages[HALF]
+    loads = [_load(0.6)]
+    always = _estimate(stages, loads, seed=3)
+    stage.slip_wanted = lambda: False
+    try:
+        out = stage.update(_points(_field(loads, np.random.default_rng(4))))
+        assert out is not None and out.slip is None
+        assert out.wrench_force[2] < 0           # the rest of the frame is there
+    finally:
+        stage.slip_wanted = lambda: True
+    again = _estimate(stages, loads, seed=3)
+    assert again == always and again.state != SLIP_NO_CONTACT

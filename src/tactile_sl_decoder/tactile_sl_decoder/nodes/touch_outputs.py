@@ -150,6 +150,8 @@ class TouchOutputs:
         self.pub_depth = node.create_publisher(Image, "depth", out_qos)
         self.pub_slip = node.create_publisher(Slip, "slip", out_qos)
         self.pub_markers = node.create_publisher(MarkerArray, "slip_markers", out_qos)
+        # the slip estimate only while something listens to it (it is per frame, no history)
+        driver.stage.slip_wanted = self._slip_heard
         latched = declare_qos(live, "pad_pose", "pad_pose (latched: late joiners get the pad "
                               "frame)", 1, "reliable", "transient_local")
         self.pub_pose = node.create_publisher(PoseStamped, "pad_pose", latched)
@@ -234,6 +236,10 @@ class TouchOutputs:
             self._publish(result, stamp)
         return True
 
+    def _slip_heard(self) -> bool:
+        return bool(self.pub_slip.get_subscription_count()
+                    or self.pub_markers.get_subscription_count())
+
     def _publish(self, result: TouchResult, stamp: tuple[int, int]) -> None:
         """One frame's touch outputs, each built only while something subscribes to it."""
         f = self.frame_id
@@ -245,7 +251,8 @@ class TouchOutputs:
             self.pub_contact.publish(contact_msg(contact_fields(result.contact, stamp, f)))
         if self.pub_depth.get_subscription_count():
             self.pub_depth.publish(image_msg(depth_fields(result.depth, stamp, f)))
-        if self.pub_slip.get_subscription_count() or self.pub_markers.get_subscription_count():
+        if result.slip is not None and (self.pub_slip.get_subscription_count()
+                                        or self.pub_markers.get_subscription_count()):
             slip = slip_fields(result.slip, stamp, f)
             if self.pub_slip.get_subscription_count():
                 self.pub_slip.publish(slip_msg(slip))

@@ -72,6 +72,7 @@ class TouchDriver:
             old = self.stage
             self.stage = TouchStage(old.sensor, old.shape, old.pitch, mirrored, old.params,
                                     old.background)
+            self.stage.slip_wanted = old.slip_wanted
 
     def tare(self) -> tuple[bool, str]:
         """Start a new reference from the next frames (refused while the pad is pressed)."""

@@ -153,10 +153,11 @@ TOUCH_TOPICS = {
 
 def touch_messages(result: TouchResult, stamp: Stamp, frame_id: str
                    ) -> list[tuple[str, str, dict[str, Any]]]:
-    """(relative topic, type, fields) of every per-frame touch output."""
+    """(relative topic, type, fields) of every per-frame touch output (slip if estimated)."""
     return [("field", TOUCH_TOPICS["field"], field_fields(result, stamp, frame_id)),
             ("wrench", TOUCH_TOPICS["wrench"], wrench_fields(result, stamp, frame_id)),
             ("contact", TOUCH_TOPICS["contact"], contact_fields(result.contact, stamp,
                                                                 frame_id)),
             ("depth", TOUCH_TOPICS["depth"], depth_fields(result.depth, stamp, frame_id)),
-            ("slip", TOUCH_TOPICS["slip"], slip_fields(result.slip, stamp, frame_id))]
+            *([("slip", TOUCH_TOPICS["slip"], slip_fields(result.slip, stamp, frame_id))]
+              if result.slip is not None else [])]

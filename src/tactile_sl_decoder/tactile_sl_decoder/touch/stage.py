@@ -27,7 +27,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -118,7 +118,13 @@ class TouchResult:
     contact: ContactState
     depth: np.ndarray          # (H, W) float32 m of indentation, NaN where not decoded
     timings_ms: dict[str, float] = field(default_factory=dict)
-    slip: SlipEstimate = field(default_factory=SlipEstimate)   # of the contact pressing hardest
+    slip: SlipEstimate | None = field(default_factory=SlipEstimate)
+    """Of the contact pressing hardest; None where it was not estimated (nobody asked:
+    :attr:`TouchStage.slip_wanted`)."""
+
+
+def _always() -> bool:
+    return True
 
 
 class _Preparation:
@@ -169,6 +175,9 @@ class TouchStage:
         self._depth = DepthMapper(self.shape, self.params.contact.depth_upsample, self.mirrored)
         # response tables of the elastomer: built once per pad (cached), ~10-50 ms
         self.slip = SlipEstimator(sensor.elastomer, self.pitch, self.params.slip)
+        # whether a frame's slip is estimated (~0.5 ms of a frame's touch stage): always,
+        # unless a node asks only while something subscribes to it
+        self.slip_wanted: Callable[[], bool] = _always
         self.reference: Reference | None = None
         self.solver: TractionSolver | None = None
         self._area_fraction = 0.0        # the solver's choice, set with each reference
@@ -398,9 +407,10 @@ class TouchStage:
         force = np.zeros((len(rows), 3))
         force[known] = forces_ref[k[known]]
         t3 = time.perf_counter()
-        slip = self.slip.estimate(self._rest_table[flat, :2], displacement, -force[:, 2],
-                                  contact, self.contact_params.area_fraction,
-                                  np.column_stack([cols, rows]))
+        slip = (self.slip.estimate(self._rest_table[flat, :2], displacement, -force[:, 2],
+                                   contact, self.contact_params.area_fraction,
+                                   np.column_stack([cols, rows]))
+                if self.slip_wanted() else None)
         t4 = time.perf_counter()
         result = TouchResult(rows, cols, position, displacement, force, wrench_force,
                              wrench_moment, contact, depth,
