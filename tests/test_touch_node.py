@@ -73,7 +73,8 @@ def test_touch_outputs_equal_offline_replay_and_tare_is_refused_when_pressed(ros
         if i == 0:   # the reference is prepared beside the frames: outputs start once it is
             assert proc.wait_for_log("fit residual", 30.0, lambda: ros.spin(0.05)), proc.log()
     end = time.monotonic() + 5
-    while time.monotonic() < end and min(map(len, received.values())) < len(frames) - 1:
+    while time.monotonic() < end and min(len(markers), *map(len, received.values())) < len(
+            frames) - 1:          # the markers follow each slip message: wait for them too
         ros.spin(0.05)
     assert proc.wait_for_log("no outputs until the reference", 1.0), proc.log()
     assert sum("no outputs until the reference" in line for line in proc.lines()) == 1
