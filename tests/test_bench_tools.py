@@ -69,4 +69,8 @@ def test_bench_sweep_runs_a_row_writes_its_figures_and_its_picture(tmp_path):
     # --bound: the Cramer-Rao bound, below what the decoder reaches, its column and picture
     assert "| CRLB, best 97 % |" in out.stdout
     assert 0 < row["bound_best_m"] <= row["bound_all_m"] < row["rmse_m"]
+    # the efficiency: RMSE over the bound of the share of glyphs the decoder kept
+    assert row["bound_best_m"] <= row["bound_kept_m"] <= row["bound_all_m"]
+    assert row["efficiency"] == pytest.approx(row["rmse_m"] / row["bound_kept_m"])
+    assert "| RMSE / CRLB (kept share) |" in out.stdout
     assert cv2.imread(str(tmp_path / "jpeg_mild_bound.png")).shape == (520, 1280, 3)
