@@ -232,7 +232,15 @@ class TractionSolver:
 
     # ------------------------------------------------------------------ helpers
 
-    def _fill_missing(self, disp: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    def moment_rows(self) -> np.ndarray:
+        """(2, 3N): the resultant's M_x and M_y as functionals of the displacement."""
+        return self._wrench_rows[3:5]
+
+    def normal_map_rows(self) -> np.ndarray:
+        """(N, 3N) float32: each cell's normal map force (-pressing) per displacement."""
+        return self._map_rows[2]
+
+    def fill_missing(self, disp: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """Displacement with missing cells filled from decoded neighbours (step 1 only)."""
         if valid.all():
             return disp
@@ -275,7 +283,7 @@ class TractionSolver:
         frame (the others are filled from their neighbours).  The per-cell forces are zero
         outside the contact support, never pull (f_z <= 0) and sum to the resultant force.
         """
-        disp = self._fill_missing(np.asarray(disp, np.float64), np.asarray(valid, bool))
+        disp = self.fill_missing(np.asarray(disp, np.float64), np.asarray(valid, bool))
         u = disp.reshape(-1)
         u32 = u.astype(np.float32)
         wrench, press = self.linear_products(u, u32)
