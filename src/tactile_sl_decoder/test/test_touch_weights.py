@@ -122,6 +122,7 @@ def test_propagated_noise_of_a_linear_functional():
 
 def test_bad_weight_settings_are_refused():
     for bad in ({"min_error": 0.0}, {"model_error": -1.0}, {"noisy_factor": 0.5},
+                {"model_error_relative": 1.0},
                 {"huber_k": 0.0}):
         with pytest.raises(ValueError):
             WeightParams(**bad).validate()

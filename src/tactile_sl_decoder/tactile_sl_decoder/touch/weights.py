@@ -25,8 +25,9 @@ steps, vectorised numpy over the reference's cells:
    neighbours' values, so it is prepared once per reference as a stencil of 24 weights per
    cell, and a frame costs one gather and one weighted sum.  The cell's value becomes the
    inverse-variance combination of its own measurement and that prediction, the
-   prediction's variance being the fit's plus ``model_error``^2 (how far a quadratic
-   departs from a real indentation over 5 x 5 cells).  A measurement whose standardised
+   prediction's variance being the fit's plus ``model_error``^2 + (``model_error_relative``
+   x the prediction)^2 (how far a quadratic departs from a real indentation over 5 x 5
+   cells: a floor, and a share of the displacement, largest at a deep contact's edge).  A measurement whose standardised
    departure from the prediction, t = |u - u_fit| / sqrt(sigma^2 + var_fit), exceeds
    ``huber_k`` gets the Huber weight k / |t| (Huber, Robust Statistics, Wiley 1981,
    sec. 7.8: the M-estimate's weight psi(t) / t), so a gross stereo error does not survive
@@ -65,8 +66,11 @@ class WeightParams:
     noisy_factor: float = 4.0
     """Cells whose expected displacement error (largest axis) exceeds this x
     ``min_error`` are cleaned; the others are taken as measured."""
-    model_error: float = 6e-6
-    """m: how far the 5 x 5 quadratic may depart from a real displacement field."""
+    model_error: float = 2e-6
+    """m: how far the 5 x 5 quadratic may depart from a real displacement field ..."""
+    model_error_relative: float = 0.03
+    """... plus this fraction of the predicted displacement (in quadrature): the departure
+    grows with the indentation's depth (steepest at a contact's edge)."""
     huber_k: float = 2.5
     """Standardised departure beyond which a measurement is down-weighted (Huber's k)."""
 
@@ -78,6 +82,9 @@ class WeightParams:
                 raise ValueError(f"{name} must be in (0, 1e-3) m, got {value}")
         if not 1.0 <= self.noisy_factor < 1e3:
             raise ValueError(f"noisy_factor must be in [1, 1e3), got {self.noisy_factor}")
+        if not 0 <= self.model_error_relative < 1:
+            raise ValueError(f"model_error_relative must be in [0, 1), got "
+                             f"{self.model_error_relative}")
         if not 0.5 <= self.huber_k < 100:
             raise ValueError(f"huber_k must be in [0.5, 100), got {self.huber_k}")
         return self
@@ -238,10 +245,13 @@ class CellWeights:
             return disp
         pred = np.einsum("mk,mkc->mc", self._coef, disp[self._nb])
         own = disp[self.noisy]
-        t = np.abs(own - pred) / np.sqrt(self._own_var + self._pred_var)
+        pred_var = self._pred_var
+        if self.params.model_error_relative > 0:
+            pred_var = pred_var + (self.params.model_error_relative * pred) ** 2
+        t = np.abs(own - pred) / np.sqrt(self._own_var + pred_var)
         huber = np.minimum(1.0, self.params.huber_k / np.maximum(t, 1e-12))
         w_own = huber / self._own_var
-        w_pred = 1.0 / self._pred_var
+        w_pred = 1.0 / pred_var
         out = disp.copy()
         out[self.noisy] = (w_own * own + w_pred * pred) / (w_own + w_pred)
         return out
