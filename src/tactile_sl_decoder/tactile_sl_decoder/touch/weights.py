@@ -27,11 +27,12 @@ steps, vectorised numpy over the reference's cells:
    inverse-variance combination of its own measurement and that prediction, the
    prediction's variance being the fit's plus ``model_error``^2 + (``model_error_relative``
    x the prediction)^2 (how far a quadratic departs from a real indentation over 5 x 5
-   cells: a floor, and a share of the displacement, largest at a deep contact's edge).  A measurement whose standardised
-   departure from the prediction, t = |u - u_fit| / sqrt(sigma^2 + var_fit), exceeds
-   ``huber_k`` gets the Huber weight k / |t| (Huber, Robust Statistics, Wiley 1981,
-   sec. 7.8: the M-estimate's weight psi(t) / t), so a gross stereo error does not survive
-   even where its expected error was underestimated.
+   cells: a floor, and a share of the displacement, largest at a deep contact's edge).
+   A measurement whose standardised departure from the prediction,
+   t = |u - u_fit| / sqrt(sigma^2 + var_fit), exceeds ``huber_k`` gets the Huber weight
+   k / |t| (Huber, Robust Statistics, Wiley 1981, sec. 7.8: the M-estimate's weight
+   psi(t) / t), so a gross stereo error does not survive even where its expected error was
+   underestimated.
 
 3. **Propagated noise** (:meth:`CellWeights.propagated`).  The errors left after cleaning
    give the standard deviation of any linear functional of the field, sqrt(sum R_j^2
