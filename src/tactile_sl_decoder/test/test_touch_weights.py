@@ -178,12 +178,14 @@ def test_the_stage_weighs_noisy_cells_out_of_force_and_centroid():
             np.mean([np.linalg.norm(o.wrench_force - want.wrench_force) for o in outs]),
             np.mean([np.hypot(*np.subtract(o.contact.centroid[:2], want.contact.centroid[:2]))
                      for o in outs]),
-            np.sqrt(np.mean([np.mean((o.displacement - truth) ** 2) for o in outs])))
+            np.sqrt(np.mean([np.mean((o.displacement - truth) ** 2) for o in outs])),
+            np.mean([abs(o.contact.area - want.contact.area) for o in outs]))
     # (a 5 x 5 dark patch is cleaned from its dark neighbours too: the resultant gains less
     # than the field)
     assert errors[True][0] < 0.85 * errors[False][0]
     assert errors[True][1] < 0.6 * errors[False][1]
     assert errors[True][2] < 0.4 * errors[False][2]
+    assert errors[True][3] < 0.15 * want.contact.area
 
 
 def test_a_clean_pad_gives_the_same_bytes_with_or_without_weights():
@@ -199,3 +201,18 @@ def test_a_clean_pad_gives_the_same_bytes_with_or_without_weights():
     assert np.array_equal(a.displacement, b.displacement)
     assert np.array_equal(a.force, b.force) and np.array_equal(a.wrench_force, b.wrench_force)
     assert a.contact == b.contact
+
+
+def test_the_support_takes_each_cells_own_noise():
+    # the contact area's constrained inversion judges its edge by each cell's noise: the
+    # cells' expected errors where given, else displacement_noise on every cell
+    stage = _stage(True)
+    rng = np.random.default_rng(17)
+    stage.update(_points(np.zeros((len(ROWS), 3))))
+    disp = _displacement(ELASTOMER, [(0, 0, -0.3, 2e-3, 0.0, 0.0)], 0.0, rng)
+    stage.update(_points(disp))
+    solver, gain = stage.solver, stage.solver.support_gain
+    nominal = solver.support_pressure(3e-6, 2.0, 5.0)
+    same = solver.support_pressure(3e-6, 2.0, 5.0, cell_noise=3e-6 * gain)
+    assert nominal is not None and np.array_equal(nominal, same)
+    assert solver.support_pressure(3e-6, 2.0, 5.0, cell_noise=1e3 * 3e-6 * gain) is None

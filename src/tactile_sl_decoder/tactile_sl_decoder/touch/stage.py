@@ -201,6 +201,7 @@ class TouchStage:
         self._last_solver: TractionSolver | None = None
         self._moment_noise = (0.0, 0.0)
         self._map_noise: np.ndarray | None = None
+        self._support_noise: np.ndarray | None = None
         self.solver_cache = (SolverCache(self.params.solver_cache_dir or None)
                              if self.params.solver_cache else None)
         all_rows, all_cols = np.divmod(np.arange(self.shape[0] * self.shape[1]), self.shape[1])
@@ -330,6 +331,12 @@ class TouchStage:
         self._moment_noise = (max(float(mx), solver.moment_noise[0]),
                               max(float(my), solver.moment_noise[1]))
         self._map_noise = weights.propagated(solver.normal_map_rows())
+        # each cell's constrained pressure noise (the contact area's support), never below
+        # that of displacement_noise on every cell
+        rows = solver.support_pressure_rows()
+        self._support_noise = (None if rows is None else
+                               np.maximum(weights.propagated(rows),
+                                          noise * solver.support_gain))
 
     @property
     def contact_params(self) -> ContactParams:
@@ -417,9 +424,12 @@ class TouchStage:
         indent[rows, cols] = -displacement[:, 2]
         contact_params = self.contact_params
         noise = contact_params.displacement_noise
+        cell_noise = self._support_noise if weighted else None
         pressure = self.solver.support_pressure(noise, contact_params.support_sigmas,
-                                                contact_params.support_edge_snr)
-        support = None if pressure is None else (pressure, noise * self.solver.support_gain)
+                                                contact_params.support_edge_snr,
+                                                cell_noise=cell_noise)
+        support = None if pressure is None else (
+            pressure, noise * self.solver.support_gain if cell_noise is None else cell_noise)
         contact = contact_state(ref.nominal[:, :2], ref_rows, ref_cols, forces_ref, wrench,
                                 self.shape, self.pitch, indent, self._in_contact,
                                 contact_params,
