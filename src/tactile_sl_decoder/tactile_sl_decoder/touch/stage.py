@@ -332,9 +332,10 @@ class TouchStage:
                               max(float(my), solver.moment_noise[1]))
         self._map_noise = weights.propagated(solver.normal_map_rows())
         # each cell's constrained pressure noise (the contact area's support), never below
-        # that of displacement_noise on every cell
+        # that of displacement_noise on every cell; only on a pad with noisy cells (on a
+        # clean one the single reference frame's roughness is no better than the setting)
         rows = solver.support_pressure_rows()
-        self._support_noise = (None if rows is None else
+        self._support_noise = (None if rows is None or len(weights.noisy) == 0 else
                                np.maximum(weights.propagated(rows),
                                           noise * solver.support_gain))
 
