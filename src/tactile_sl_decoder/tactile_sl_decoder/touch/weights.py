@@ -201,7 +201,7 @@ def _stencils(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], weight
 class CellWeights:
     """The per-cell weights of one reference: expected errors and the cleaning stencils.
 
-    Built once per reference (:meth:`TouchStage._set_reference`, ~1 ms): ``error`` (N, 3)
+    Built once per reference (:meth:`TouchStage._set_reference`, a few ms): ``error`` (N, 3)
     m, each cell's expected displacement error; ``noisy`` the cells cleaned in every frame
     (expected error above ``noisy_factor`` x ``min_error``) with their stencils; ``effective``
     (N, 3) m, the expected error after cleaning (a cleaned cell's combination of its own
