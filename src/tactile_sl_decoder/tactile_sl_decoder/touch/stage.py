@@ -202,6 +202,7 @@ class TouchStage:
         self._moment_noise = (0.0, 0.0)
         self._map_noise: np.ndarray | None = None
         self._support_noise: np.ndarray | None = None
+        self._centroid_noise: np.ndarray | None = None
         self.solver_cache = (SolverCache(self.params.solver_cache_dir or None)
                              if self.params.solver_cache else None)
         all_rows, all_cols = np.divmod(np.arange(self.shape[0] * self.shape[1]), self.shape[1])
@@ -331,6 +332,12 @@ class TouchStage:
         self._moment_noise = (max(float(mx), solver.moment_noise[0]),
                               max(float(my), solver.moment_noise[1]))
         self._map_noise = weights.propagated(solver.normal_map_rows())
+        # the map noise beyond displacement_noise's: the map centroid's uncertainty (only
+        # on a pad with noisy cells, like the support's noise below)
+        clean = noise * np.sqrt(np.sum(np.square(solver.normal_map_rows(), dtype=np.float64),
+                                       axis=1))
+        self._centroid_noise = (None if len(weights.noisy) == 0 else
+                                np.sqrt(np.maximum(self._map_noise ** 2 - clean ** 2, 0.0)))
         # each cell's constrained pressure noise (the contact area's support), never below
         # that of displacement_noise on every cell; only on a pad with noisy cells (on a
         # clean one the single reference frame's roughness is no better than the setting)
@@ -435,7 +442,8 @@ class TouchStage:
                                 self.shape, self.pitch, indent, self._in_contact,
                                 contact_params,
                                 self._moment_noise if weighted else self.solver.moment_noise,
-                                support, self._map_noise if weighted else None)
+                                support, self._map_noise if weighted else None,
+                                self._centroid_noise if weighted else None)
         self._in_contact = contact.in_contact
         depth = self._depth(indent)
         force = np.zeros((len(rows), 3))
