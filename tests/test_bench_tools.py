@@ -40,7 +40,8 @@ def test_bench_touch_prints_the_slip_table_and_times():
         capture_output=True, text=True, timeout=300, env=ros_env(next_domain_id()))
     assert out.returncode == 0, out.stderr[-3000:]
     for section in ("slip_halfspace", "gross slip:", "slip margin |error|",
-                    "friction coefficient |error|", "of which slip", "pipeline (total)"):
+                    "friction coefficient |error|", "of which slip", "pipeline (total)",
+                    "light_harsh_mjpeg", "dCen worst mm"):     # the lighting table
         assert section in out.stdout, section
 
 

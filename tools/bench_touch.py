@@ -5,6 +5,7 @@
     python tools/bench_touch.py --repeat 5       # more frames for the timing figures
     python tools/bench_touch.py --no-slip        # without the slip scenes
     python tools/bench_touch.py --no-shapes      # without the indenter shape scenes
+    python tools/bench_touch.py --compare        # lighting table without and with weights
 
 Runs the evaluation of ``tactile-sl evaluate`` (pipeline + touch stage, each frame decoded
 once, reference = the first frame) over bags/touch_halfspace.mcap and
@@ -24,6 +25,14 @@ friction coefficients, sizes, directions and normal loads, with and without imag
 nuisances; rendered into a temporary folder first, about a minute): per scene and frame the
 true and estimated slip state, stick ratio, margin and friction coefficient, and the
 acceptance figures of issue 24 (docs/slip.md).
+
+Then the lighting scenes (bags/light_scenes.yaml: the same known loads under clean light,
+harsh light and harsh light with MJPEG; rendered first, a few seconds): per scene the pooled
+displacement RMSE and its ratio to the clean scene's, and the worst centroid, normal force,
+force vector and contact area errors, with the limits of issue 25 (harsh rows: RMSE <= 2x clean,
+centroid <= 0.1 mm, force within 2 %).  ``--compare`` evaluates every touch bag and scene
+twice, without the per-cell weights (``WeightParams.enabled = False``, the touch stage before
+issue 25) and with them, and prints both side by side, with both touch stage times.
 
 Last the touch stage's time per frame (``TouchResult.timings_ms['touch']``) and its slip
 estimate's part (``['slip']``) beside the pipeline's own time per stereo pair
@@ -51,6 +60,8 @@ from tactile_sl_decoder.tooling.touch_metrics import (
     sensor_text,
 )
 from tactile_sl_decoder.touch.sensor import SensorConfig
+from tactile_sl_decoder.touch.stage import TouchParams
+from tactile_sl_decoder.touch.weights import WeightParams
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 BAGS = REPO / "bags"
@@ -59,6 +70,8 @@ TOUCH_BAGS = (("touch_halfspace", 0.0), ("touch_layer", 0.002), ("touch_calibrat
 CONTROL_BAG = "no_contact"
 SLIP_SCENES = BAGS / "slip_scenes.yaml"
 SHAPE_SCENES = BAGS / "shape_scenes.yaml"
+LIGHT_SCENES = BAGS / "light_scenes.yaml"
+CLEAN_LIGHT = "light_clean"
 
 
 def render_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str]
@@ -100,36 +113,66 @@ def main() -> int:
                         help="indenter shapes to render and evaluate (default: %(default)s)")
     parser.add_argument("--no-shapes", action="store_true",
                         help="leave the indenter shape scenes out")
+    parser.add_argument("--light-scenes", type=pathlib.Path, default=LIGHT_SCENES,
+                        help="known loads under clean and harsh light (default: %(default)s)")
+    parser.add_argument("--no-light", action="store_true", help="leave the lighting scenes out")
+    parser.add_argument("--compare", action="store_true",
+                        help="the touch bags and lighting scenes without the per-cell weights "
+                        "too (the touch stage before issue 25), side by side")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="bench_touch_") as tmp:
         shape_bags = ([] if args.no_shapes else
                       render_scenes(args.shape_scenes, pathlib.Path(tmp) / "shapes", []))
         slip_bags = [] if args.no_slip else render_scenes(args.slip_scenes,
                                                           pathlib.Path(tmp) / "slip", args.only)
-        return _run(args, slip_bags, shape_bags)
+        light_bags = ([] if args.no_light else
+                      render_scenes(args.light_scenes, pathlib.Path(tmp) / "light", []))
+        return _run(args, slip_bags, shape_bags, light_bags)
 
 
 def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, SensorConfig]],
-         shape_bags: list[tuple[str, pathlib.Path, SensorConfig]]) -> int:
+         shape_bags: list[tuple[str, pathlib.Path, SensorConfig]],
+         light_bags: list[tuple[str, pathlib.Path, SensorConfig]]) -> int:
     load0 = os.getloadavg()
     pipe = StereoPipeline(PatternSpec.load(None))
     times: dict[str, list[float]] = {"touch": [], "slip": [], "pipeline": []}
-    report = slip_report = shape_report = None
+    unweighted_times: list[float] = []
+    weighted = TouchParams()
+    unweighted = TouchParams(weights=WeightParams(enabled=False))
+    report = slip_report = shape_report = light_report = None
     t0 = time.perf_counter()
     try:
         for rep in range(max(1, args.repeat)):
             progress = sys.stderr if rep == 0 else None
             per_bag = []
+            compared: list[tuple[str, list, list]] = []   # (name, unweighted, weighted)
             for name, thickness in TOUCH_BAGS + ((CONTROL_BAG, 0.0),):
                 sensor = SensorConfig(Elastomer(args.youngs_modulus, args.poisson_ratio,
                                                 thickness), source="bench_touch")
                 control = name == CONTROL_BAG
                 frames = evaluate_touch_bag(BAGS / f"{name}.mcap", pipe, sensor,
-                                            untouched=control, progress=progress)
+                                            untouched=control, progress=progress,
+                                            touch_params=weighted)
                 what = sensor_text(sensor) + (" (untouched control: zero truth)"
                                               if control else "")
                 per_bag.append((name, what, frames))
                 _collect(times, frames)
+                if args.compare:
+                    old = evaluate_touch_bag(BAGS / f"{name}.mcap", pipe, sensor,
+                                             untouched=control, touch_params=unweighted)
+                    unweighted_times.extend(f.timings_ms["touch"] for f in old
+                                            if "touch" in f.timings_ms)
+                    compared.append((name, old, frames))
+            for name, path, sensor in light_bags:
+                frames = evaluate_touch_bag(path, pipe, sensor, progress=progress,
+                                            touch_params=weighted)
+                _collect(times, frames)
+                old = []
+                if args.compare:
+                    old = evaluate_touch_bag(path, pipe, sensor, touch_params=unweighted)
+                    unweighted_times.extend(f.timings_ms["touch"] for f in old
+                                            if "touch" in f.timings_ms)
+                compared.append((name, old, frames))
             per_shape = []
             for name, path, sensor in shape_bags:
                 frames = evaluate_touch_bag(path, pipe, sensor, progress=progress)
@@ -142,6 +185,8 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
                 _collect(times, frames)
             if report is None:
                 report = format_report(per_bag)[0]
+                light_report = (light_table(compared, args.compare)
+                                if light_bags or args.compare else None)
                 slip_report = format_slip_report(per_scene) if per_scene else None
                 shape_report = format_shape_report(per_shape) if per_shape else None
     finally:
@@ -153,6 +198,12 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
     if shape_report:
         print(f"indenter shapes ({args.shape_scenes}):")
         print(shape_report)
+        print()
+    if light_report:
+        print(f"lighting and touch bags ({args.light_scenes}; per-cell weights, "
+              f"docs/touch.md; before -> with weights):" if args.compare else
+              f"lighting ({args.light_scenes}):")
+        print(light_report)
         print()
     if slip_report:
         print(f"slip ({args.slip_scenes}; truth t / estimate e; docs/slip.md):")
@@ -166,9 +217,64 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
     for label, v in (("touch stage", t), ("  of which slip", s), ("pipeline (total)", p)):
         print(f"{label:<22} {np.median(v):>10.2f} {np.percentile(v, 90):>8.2f} "
               f"{v.max():>8.2f}")
+    if unweighted_times:
+        u = np.asarray(unweighted_times)
+        print(f"{'touch, no weights':<22} {np.median(u):>10.2f} {np.percentile(u, 90):>8.2f} "
+              f"{u.max():>8.2f}   (--compare: the same bags, weights off)")
     print(f"touch stage / pipeline (medians): {100 * np.median(t) / np.median(p):.1f} %; "
           f"limits: touch stage <= 3 ms, slip estimate <= 1 ms per frame")
     return 0
+
+
+def _light_figures(frames: list) -> dict[str, float]:
+    """Pooled displacement RMSE (m) and the worst centroid (m), normal and vector errors (%)."""
+    cells = sum(f.cells for f in frames)
+    sq = sum(f.disp_rmse ** 2 * f.cells for f in frames if f.cells)
+    loaded = [f for f in frames if f.force_true is not None and np.any(f.force_true)]
+    return {
+        "rmse": float(np.sqrt(sq / cells)) if cells else float("nan"),
+        "centroid": max((f.centroid_err for f in frames if f.contact_true), default=np.nan),
+        "normal": max((abs(f.normal_err_pct) for f in loaded), default=np.nan),
+        "vector": max((100.0 * float(np.linalg.norm(f.force_est - f.force_true)
+                                     / np.linalg.norm(f.force_true)) for f in loaded),
+                      default=np.nan),
+        "area": max((abs(f.area_err_pct) for f in frames if f.contact_true), default=np.nan)}
+
+
+def _was(old: dict[str, float] | None, key: str) -> float | None:
+    return None if old is None else old[key]
+
+
+def light_table(compared: list[tuple[str, list, list]], both: bool) -> str:
+    """The lighting table: per bag or scene its figures (``both``: unweighted -> weighted).
+
+    The ratio is to the clean scene's RMSE (``light_clean``) of the same variant.
+    """
+    figures = {name: (_light_figures(old) if old else None, _light_figures(new))
+               for name, old, new in compared}
+    clean = figures.get(CLEAN_LIGHT)
+    lines = [f"{'scene':<20} {'dRMSE um':>16} {'x clean':>12} {'dCen worst mm':>16} "
+             f"{'dFn worst %':>14} {'|dF| worst %':>14} {'|dArea| worst %':>16}"]
+
+    def cell(old: float | None, new: float, scale: float, fmt: str, width: int) -> str:
+        text = f"{new * scale:{fmt}}"
+        if both and old is not None:
+            text = f"{old * scale:{fmt}} -> {text}"
+        return f"{text:>{width}}"
+
+    for name, (old, new) in figures.items():
+        ratio_new = new["rmse"] / clean[1]["rmse"] if clean else np.nan
+        ratio_old = (old["rmse"] / clean[0]["rmse"] if old is not None and clean
+                     and clean[0] is not None else None)
+        lines.append(f"{name:<20} {cell(_was(old, 'rmse'), new['rmse'], 1e6, '.2f', 16)} "
+                     f"{cell(ratio_old, ratio_new, 1.0, '.2f', 12)} "
+                     f"{cell(_was(old, 'centroid'), new['centroid'], 1e3, '.3f', 16)} "
+                     f"{cell(_was(old, 'normal'), new['normal'], 1.0, '.2f', 14)} "
+                     f"{cell(_was(old, 'vector'), new['vector'], 1.0, '.2f', 14)} "
+                     f"{cell(_was(old, 'area'), new['area'], 1.0, '.1f', 16)}")
+    lines.append("limits (issue 25, harsh rows): dRMSE <= 2 x clean, dCen <= 0.1 mm, "
+                 "force within 2 %; clean rows and bags: no worse")
+    return "\n".join(lines)
 
 
 def _collect(times: dict[str, list[float]], frames: list) -> None:

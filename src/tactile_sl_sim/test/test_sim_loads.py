@@ -295,6 +295,22 @@ def test_shape_scenes_file_is_valid():
     assert scenes["shape_layer"].elastomer.thickness == pytest.approx(0.002)
 
 
+def test_light_scenes_file_is_valid():
+    """bags/light_scenes.yaml (bench_touch): the same loads under clean and harsh light."""
+    scenes = {s.name: s for s in load_scenes(BAGS / "light_scenes.yaml")}
+    assert set(scenes) == {"light_clean", "light_harsh", "light_harsh_mjpeg"}
+    clean, harsh, mjpeg = (scenes[n] for n in ("light_clean", "light_harsh",
+                                               "light_harsh_mjpeg"))
+    for frame in range(clean.frames):
+        loads = [[(c.force, c.x, c.y) for c in s.contacts_at(frame)]
+                 for s in (clean, harsh, mjpeg)]
+        assert loads[0] == loads[1] == loads[2]
+    assert clean.nuisances.noise_sigma < harsh.nuisances.noise_sigma == 4.0
+    assert harsh.nuisances.shadows and harsh.nuisances.jpeg_quality == 0
+    assert mjpeg.nuisances.jpeg_quality == 70
+    assert mjpeg.nuisances.shadows == harsh.nuisances.shadows
+
+
 def test_touch_scenes_file_is_valid():
     path = BAGS / "touch_scenes.yaml"
     if not path.is_file():

@@ -92,17 +92,21 @@ def evaluate_bag(path: str | Path, pipeline: Any, namespace: str = "/tactile",
 def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_frames: int = 1,
                        namespace: str = "/tactile", progress: TextIO | None = None,
                        max_frames: int = 0, untouched: bool = False,
-                       on_skip: SkipCallback | None = None) -> list[TouchFrameMetrics]:
+                       on_skip: SkipCallback | None = None,
+                       touch_params: TouchParams | None = None) -> list[TouchFrameMetrics]:
     """Pipeline + touch stage over a bag (as ``tactile-sl replay``), each frame decoded once.
 
     Frames used for the reference give no figures.  ``untouched``: the bag has no touch
     ground truth and the pad is at rest throughout (a control: zero truth).
     Timings per frame: ``pipeline`` (the pipeline's total), ``touch`` (the stage's) and
     ``slip`` (the slip estimate's part of it).  A frame with unusable input goes to
-    ``on_skip`` as in :func:`evaluate_bag`.
+    ``on_skip`` as in :func:`evaluate_bag`.  ``touch_params``: the touch stage's settings
+    (default: all defaults with ``reference_frames``).
     """
     truths = {} if untouched else read_truths(path, namespace)
-    step = SensorStep(pipeline, sensor, TouchParams(reference_frames=reference_frames))
+    if touch_params is None:
+        touch_params = TouchParams(reference_frames=reference_frames)
+    step = SensorStep(pipeline, sensor, touch_params)
     name = Path(path).stem
     total = count_bag_frames(path, namespace)
     out: list[TouchFrameMetrics] = []

@@ -335,7 +335,9 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                   forces: np.ndarray, wrench: np.ndarray, shape: tuple[int, int], pitch: float,
                   indent_grid: np.ndarray, was_in_contact: bool, params: ContactParams,
                   moment_noise: tuple[float, float] = (0.0, 0.0),
-                  support: tuple[np.ndarray, np.ndarray] | None = None) -> ContactState:
+                  support: tuple[np.ndarray, np.ndarray] | None = None,
+                  map_noise: np.ndarray | None = None,
+                  centroid_noise: np.ndarray | None = None) -> ContactState:
     """Contact state from per-cell forces (N) at rest positions (m) and the resultant.
 
     Normal and shear force come from the resultant.  The regions come from the per-cell
@@ -359,6 +361,18 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     centroids, each from the region's cells above ``core_fraction`` of its peak: local,
     uncertain to about ``map_centroid_sigma``).  They are combined per axis by inverse
     variance (the minimum-variance unbiased combination of two independent estimates).
+
+    ``map_noise`` (N,): the standard deviation of each cell's map force (N), propagated
+    from the cells' expected displacement errors
+    (:meth:`~tactile_sl_decoder.touch.weights.CellWeights.propagated`).  With it a region
+    whose force is less than ``RIPPLE_SIGMAS`` x its noise (sqrt(sum s_i^2): independent
+    cells) is a ripple of the noise, not a contact, and dropped (a frame whose every region
+    is one takes the resultant's centroid).  ``centroid_noise`` (N,): the part of each
+    cell's map noise beyond that of ``displacement_noise``; with it a region's map centroid
+    is uncertain by ``map_centroid_sigma`` and, in quadrature, its core's RMS radius times
+    the peak cell's noise-to-force ratio (the core, the cells above ``core_fraction`` of
+    the peak, is chosen by a peak the noise moves), so that a faint contact under harsh
+    light leans on the resultant's centroid.
     """
     press = np.maximum(-forces[:, 2], 0.0)
     normal = max(-float(wrench[2]), 0.0)
@@ -377,6 +391,7 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     count, labels = cv2.connectedComponents(grid, connectivity=8)
     region = labels[rows, cols]
     regions = []
+    spread = []            # per region: the noise variance of its map centroid (m^2)
     level = params.area_fraction * float(press.max())
     found = _support(support, rows, cols, shape, params)
     for k in range(1, count):
@@ -388,17 +403,34 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                 wp = w[mine]
                 core = np.where(wp > params.core_fraction * wp.max(), wp, 0.0)
                 c = (core[:, None] * rest_xy[sel][mine]).sum(axis=0) / core.sum()
+                noise = None if map_noise is None else map_noise[sel][mine]
+                if noise is not None and _ripple(wp, noise):
+                    continue
                 regions.append((float(wp.sum()), float(found.area_cells[part]) * cell_area,
                                 (float(c[0]), float(c[1]), 0.0), int(found.cells[part])))
+                spread.append(_centroid_variance(
+                    core, rest_xy[sel][mine], c,
+                    None if centroid_noise is None else centroid_noise[sel][mine]))
             continue
         inside = int((w > level).sum())
         if inside == 0:          # a ripple of the map, not a contact
             continue
+        noise = None if map_noise is None else map_noise[sel]
+        if noise is not None and _ripple(w, noise):
+            continue             # ... or of the noise
         core = np.where(w > params.core_fraction * w.max(), w, 0.0)
         c = (core[:, None] * rest_xy[sel]).sum(axis=0) / core.sum()
         regions.append((float(w.sum()), inside * cell_area, (float(c[0]), float(c[1]), 0.0),
                         inside))
-    regions.sort(key=lambda t: -t[0])
+        spread.append(_centroid_variance(
+            core, rest_xy[sel], c, None if centroid_noise is None else centroid_noise[sel]))
+    from_wrench = np.array([float(wrench[4]) / normal, -float(wrench[3]) / normal])
+    if not regions:          # every region a ripple of the noise: the resultant's centroid
+        state.centroid = (float(from_wrench[0]), float(from_wrench[1]), 0.0)
+        return state
+    order = sorted(range(len(regions)), key=lambda i: -regions[i][0])   # stable, as sort
+    regions = [regions[i] for i in order]
+    spread = [spread[i] for i in order]
     state.region_force = [r[0] for r in regions]
     state.region_area = [r[1] for r in regions]
     state.region_centroid = [r[2] for r in regions]
@@ -408,14 +440,37 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     from_map = np.array([sum(f * c[i] for f, c in zip(state.region_force,
                                                       state.region_centroid)) / total
                          for i in (0, 1)])
-    from_wrench = np.array([float(wrench[4]) / normal, -float(wrench[3]) / normal])
     var_wrench = (params.displacement_noise * np.array([moment_noise[1], moment_noise[0]])
                   / normal) ** 2
-    w_map = 1.0 / params.map_centroid_sigma ** 2
+    w_map = 1.0 / (params.map_centroid_sigma ** 2
+                   + sum((f / total) ** 2 * v for f, v in zip(state.region_force, spread)))
     w_wrench = 1.0 / np.maximum(var_wrench, 1e-30)
     cx, cy = (w_map * from_map + w_wrench * from_wrench) / (w_map + w_wrench)
     state.centroid = (float(cx), float(cy), 0.0)
     return state
+
+
+RIPPLE_SIGMAS = 8.0
+"""A map region whose force is below this x its noise is dropped."""
+
+
+def _ripple(force: np.ndarray, noise: np.ndarray) -> bool:
+    """The region's force (per cell, N) is within ``RIPPLE_SIGMAS`` x its ``noise``."""
+    return bool(force.sum() <= RIPPLE_SIGMAS * np.sqrt(np.sum(noise ** 2)))
+
+
+def _centroid_variance(core: np.ndarray, xy: np.ndarray, c: np.ndarray,
+                       noise: np.ndarray | None) -> float:
+    """Noise variance (m^2 per axis) of a region's map centroid; 0 without ``noise``.
+
+    The core's RMS radius about ``c`` times the peak's ``noise``-to-force ratio, squared.
+    """
+    if noise is None:
+        return 0.0
+    peak = int(np.argmax(core))
+    inside = core > 0
+    radius2 = float(np.mean(np.sum((xy[inside] - c[:2]) ** 2, axis=1)))
+    return radius2 * float(noise[peak] / core[peak]) ** 2
 
 
 def _support(support: tuple[np.ndarray, np.ndarray] | None, rows: np.ndarray,

@@ -232,7 +232,19 @@ class TractionSolver:
 
     # ------------------------------------------------------------------ helpers
 
-    def _fill_missing(self, disp: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    def moment_rows(self) -> np.ndarray:
+        """(2, 3N): the resultant's M_x and M_y as functionals of the displacement."""
+        return self._wrench_rows[3:5]
+
+    def support_pressure_rows(self) -> np.ndarray | None:
+        """(N, 3N) float32: each cell's constrained-inversion pressure per displacement."""
+        return self._support_rows
+
+    def normal_map_rows(self) -> np.ndarray:
+        """(N, 3N) float32: each cell's normal map force (-pressing) per displacement."""
+        return self._map_rows[2]
+
+    def fill_missing(self, disp: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """Displacement with missing cells filled from decoded neighbours (step 1 only)."""
         if valid.all():
             return disp
@@ -275,7 +287,7 @@ class TractionSolver:
         frame (the others are filled from their neighbours).  The per-cell forces are zero
         outside the contact support, never pull (f_z <= 0) and sum to the resultant force.
         """
-        disp = self._fill_missing(np.asarray(disp, np.float64), np.asarray(valid, bool))
+        disp = self.fill_missing(np.asarray(disp, np.float64), np.asarray(valid, bool))
         u = disp.reshape(-1)
         u32 = u.astype(np.float32)
         wrench, press = self.linear_products(u, u32)
@@ -309,7 +321,8 @@ class TractionSolver:
         return self._support_rows is not None
 
     def support_pressure(self, noise: float, sigmas: float, min_snr: float,
-                         max_rounds: int = 30) -> np.ndarray | None:
+                         max_rounds: int = 30, cell_noise: np.ndarray | None = None
+                         ) -> np.ndarray | None:
         """Normal pressure (N per cell, >= 0) near the last frame's contact, constrained.
 
         The cells where it is wanted and held >= 0 are those of the last :meth:`solve`'s
@@ -321,18 +334,22 @@ class TractionSolver:
         also spares the active set on faint, wide contacts, whose window is the largest).
         The active set is :func:`~tactile_sl_decoder.touch.support.constrained_edge`
         (compiled); after ``max_rounds`` a cell still pulling is clipped to zero.
+        ``cell_noise`` (N,): each cell's noise (N) instead of ``noise`` x
+        :attr:`support_gain` (the cells' own expected errors: :mod:`.weights`).
         """
         if self._support_rows is None or self._near is None or len(self._near[1]) == 0:
             return None
         u32, window = self._near
         free = _rows_product(self._support_rows, window, u32)
-        if not np.any(free > min_snr * noise * self.support_gain[window]):
+        spread = (noise * self.support_gain[window] if cell_noise is None
+                  else cell_noise[window])
+        if not np.any(free > min_snr * spread):
             return None
         out = np.zeros(len(self.cells))
         # only cells at the edge of those that clearly press are held (one cell either side):
         # noise pulling farther away is left as it is (those cells do not press anyway), and
         # the inside of a contact presses clearly
-        clear = free > sigmas * noise * self.support_gain[window]
+        clear = free > sigmas * spread
         p = constrained_edge(free, clear, self.rows[window], self.cols[window], self.shape[0],
                              self.shape[1], self._support_inverse, window, int(max_rounds))
         out[window] = np.maximum(p, 0.0)
