@@ -169,6 +169,7 @@ class DecoderNode(Node):
                     "outliers": p.outliers, "carry": p.carry, "transfer": p.transfer,
                     "rescue": p.rescue, "extraction": p.extraction, "diagnostics": self.limits,
                     "touch": self.touch_params, "contact": self.touch_params.contact,
+                    "touch_weights": self.touch_params.weights,
                     "elastomer": self.overrides}
         apply = {"node": self._apply_node, "decode": self._apply_decode,
                  "extraction": self._apply_extraction}

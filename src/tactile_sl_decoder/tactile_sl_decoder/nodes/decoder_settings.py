@@ -24,6 +24,7 @@ from tactile_sl_decoder.stereo.transfer import TRANSFER_SETTINGS
 from tactile_sl_decoder.touch.contact import CONTACT_SETTINGS
 from tactile_sl_decoder.touch.sensor import SensorConfig
 from tactile_sl_decoder.touch.stage import TOUCH_SETTINGS
+from tactile_sl_decoder.touch.weights import WEIGHT_SETTINGS
 
 INPUTS = ("images", "symbols")
 
@@ -165,6 +166,8 @@ DECODER_TABLES: tuple[Declared, ...] = (
     Declared("diagnostics", DIAGNOSTIC_SETTINGS, "diagnostics.", "Diagnostics threshold: "),
     Declared("touch", TOUCH_SETTINGS),
     Declared("contact", CONTACT_SETTINGS, "contact_"),
+    Declared("touch_weights", WEIGHT_SETTINGS, "touch_weights.",
+             "Per-cell weights of the touch stage (docs/touch.md): "),
     Declared("elastomer", ELASTOMER_OVERRIDES, "elastomer."),
 )
 """Every table the decoder node declares, in order."""

@@ -51,6 +51,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from tactile_sl_common.settings import SettingsTable
+
 RADIUS = 2
 """Neighbours within this many cells along rows and columns (a 5 x 5 window)."""
 
@@ -76,19 +78,19 @@ class WeightParams:
     """Standardised departure beyond which a measurement is down-weighted (Huber's k)."""
 
     def validate(self) -> "WeightParams":
-        """Raise ValueError for values outside their ranges."""
-        for name in ("min_error", "model_error"):
-            value = getattr(self, name)
-            if not 0 < value < 1e-3:
-                raise ValueError(f"{name} must be in (0, 1e-3) m, got {value}")
-        if not 1.0 <= self.noisy_factor < 1e3:
-            raise ValueError(f"noisy_factor must be in [1, 1e3), got {self.noisy_factor}")
-        if not 0 <= self.model_error_relative < 1:
-            raise ValueError(f"model_error_relative must be in [0, 1), got "
-                             f"{self.model_error_relative}")
-        if not 0.5 <= self.huber_k < 100:
-            raise ValueError(f"huber_k must be in [0.5, 100), got {self.huber_k}")
+        """Raise ValueError for values outside their ranges (:data:`WEIGHT_SETTINGS`)."""
+        WEIGHT_SETTINGS.check(self, "touch_weights.")
         return self
+
+
+WEIGHT_SETTINGS = SettingsTable(
+    WeightParams, ranges={"min_error": (1e-9, 1e-3), "model_error": (1e-9, 1e-3),
+                          "noisy_factor": (1.0, 1e3), "model_error_relative": (0.0, 0.99),
+                          "huber_k": (0.5, 100.0)},
+    read_only=("enabled", "min_error", "noisy_factor", "model_error", "model_error_relative",
+               "huber_k"))
+"""The decoder node's ``touch_weights.*`` parameters: read at start (the expected errors
+are a reference's, prepared in the background), so refused live."""
 
 
 def _basis() -> tuple[np.ndarray, np.ndarray]:
