@@ -8,10 +8,10 @@ The browser sets the pace, within a cap: a page asks for the next frame when it 
 the last one, and only then is a frame converted and encoded (in one worker thread, once per
 frame for all pages); the server sends each page at most ``max_rate`` frames a second (0 =
 no cap; changeable while serving), holding a request until the page's next send is due and
-then sending the newest frame.  A page that stops asking costs nothing; one that asks and does not read blocks
-only its own sender (one message in flight, dropped after ``send_timeout``), and the
-heartbeat closes a connection whose browser vanished.  Frames that arrive in between are
-never queued: the page gets the newest one.
+then sending the newest frame.  A page that stops asking costs nothing; one that asks and
+does not read blocks only its own sender (one message in flight, dropped after
+``send_timeout``), and the heartbeat closes a connection whose browser vanished.  Frames
+that arrive in between are never queued: the page gets the newest one.
 """
 from __future__ import annotations
 
