@@ -6,8 +6,11 @@ phases of ``--seconds`` each (after ``--settle`` seconds):
 
 1. no viewer at all;
 2. the `viewer` node and headless Chromium (the distribution's, via playwright) with the page
-   open, drawing every frame it is sent; 2b. instead of the browser, a client that asks for
-   every frame and reads it without drawing (the viewer's own cost: conversion, encoding);
+   open, drawing every frame it is sent, at the viewer's default cap (``max_rate``, 10 frames
+   a second to each page; ``--max-rate`` sets another);
+   2b. the same page with the cap off (``max_rate`` 0, set live): every frame it can draw;
+   2c. instead of the browser, a client that asks for every frame and reads it without
+   drawing, cap off (the viewer's own cost at full rate: conversion, encoding);
 3. the page closed; two stalled clients on the viewer for ``--stall`` seconds: one that
    connects and never asks for a frame (a frozen tab), one that asks for frames and never
    reads its socket (its receive window fills); the viewer's resident memory is sampled
@@ -17,10 +20,11 @@ phases of ``--seconds`` each (after ``--settle`` seconds):
 
 Printed per phase: decoded frames per second (clouds received here whose stamps fall in the
 phase, so a late cloud counts for its own frame), against the mean of phases 1 and 4 (without
-a page, before and after); stamp-to-cloud latency (median, p90); CPU of the decoder, the
-viewer and Chromium (per cent of one CPU); frames the page drew; the viewer's memory over the
-stall. Chromium runs at nice 19 by default (``--browser-nice``): on a robot the page is open
-on another computer; here it shares the cores. Figures, not a pass/fail test.
+a page, before and after); stamp-to-cloud latency (median, p90); CPU of the decoder (with
+its camera worker processes), the viewer and Chromium (per cent of one CPU); the one-minute
+load average at the phase's end; frames the page drew; the viewer's memory over the stall.
+Chromium runs at nice 19 by default (``--browser-nice``): on a robot the page is open on
+another computer; here it shares the cores. Figures, not a pass/fail test.
 
     python tools/bench_viewer.py                       # 30 Hz, 20 s phases, 30 s stall
     python tools/bench_viewer.py --rate 6 --seconds 30 # 60 Hz
@@ -42,6 +46,8 @@ from typing import Any
 
 import numpy as np
 import rclpy
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -77,6 +83,22 @@ class Clouds:
             self.executor.spin_once(timeout_sec=0.02)
             if also is not None:
                 also()
+
+    def set_double(self, node: str, name: str, value: float) -> None:
+        """Set a double parameter of ``node`` (a live change, as `ros2 param set`)."""
+        client = self.node.create_client(SetParameters, f"{node}/set_parameters")
+        try:
+            if not client.wait_for_service(timeout_sec=10.0):
+                raise RuntimeError(f"{node}/set_parameters did not appear")
+            value_msg = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+            future = client.call_async(SetParameters.Request(
+                parameters=[Parameter(name=name, value=value_msg)]))
+            self.executor.spin_until_future_complete(future, timeout_sec=10.0)
+            result = future.result()
+            if result is None or not result.results[0].successful:
+                raise RuntimeError(f"{node}: {name} := {value} refused: {result}")
+        finally:
+            self.node.destroy_client(client)
 
     def close(self) -> None:
         self.executor.shutdown()
@@ -233,6 +255,8 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, phases, repor
     parser.add_argument("--browser-nice", type=int, default=19,
                         help="niceness of Chromium's processes (default 19: the browser "
                         "normally runs on another computer; 0 = as any process)")
+    parser.add_argument("--max-rate", type=float, default=None,
+                        help="the viewer's max_rate in phase 2 (default: the node's own, 10)")
     parser.add_argument("--page-fps", type=float, default=0.0,
                         help="the page asks for at most this many frames a second (its ?fps= "
                         "option; 0 = every frame it can draw)")
@@ -256,14 +280,15 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, phases, repor
                 seconds: float | None = None) -> dict:
         """CPU over the phase now; frames by stamp window at the end (late clouds count)."""
         clouds.spin(args.settle, during)
-        watched = {k: [p.pid] for k, p in procs.items() if k != "replay"}
+        # the decoder with its camera workers (child processes)
+        watched = {k: _descendants([p.pid]) for k, p in procs.items() if k != "replay"}
         if extra_pids:
             watched["chromium"] = extra_pids
         cpu0 = {k: _cpu_of(v) for k, v in watched.items()}
         t0, w0 = time.monotonic(), time.time_ns()
         clouds.spin(seconds or args.seconds, during)
         t1, w1 = time.monotonic(), time.time_ns()
-        row = {"window": (w0, w1),
+        row = {"window": (w0, w1), "load": os.getloadavg()[0],
                "cpu": {k: 100 * (_cpu_of(v) - cpu0[k]) / (t1 - t0) for k, v in watched.items()}}
         rows.append((name, row))
         return row
@@ -278,8 +303,9 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, phases, repor
             "-p", "restamp:=true", "-p", "wait_for_subscribers:=1",
             "-p", "wait_for_subscribers_timeout:=60.0"])
         measure("1 no viewer")
+        cap = [] if args.max_rate is None else ["-p", f"max_rate:={float(args.max_rate)}"]
         viewer = launch("viewer", "tactile_sl_viewer", "viewer", ["-p", "port:=0",
-                                                                  "-p", "linger:=2.0"])
+                                                                  "-p", "linger:=2.0", *cap])
         log = args.logs / "viewer.log"
         url = ""
         deadline = time.monotonic() + 30
@@ -298,11 +324,20 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, phases, repor
             clouds.spin(1.0)
             chromium = _descendants(browser)
             _renice(chromium, args.browser_nice)    # the browser stands for a laptop's
-            row = measure("2 page open", chromium)
-            drawn = int(page.evaluate("Number(document.body.dataset.frames)"))
-            row["page_fps"] = drawn / (args.seconds + args.settle)
+
+            def drawn() -> int:
+                return int(page.evaluate("Number(document.body.dataset.frames)"))
+
+            shown = drawn()
+            cap_text = "10" if args.max_rate is None else f"{args.max_rate:g}"
+            row = measure(f"2 page, cap {cap_text}/s", chromium)
+            row["page_fps"] = (drawn() - shown) / (args.seconds + args.settle)
+            clouds.set_double("/tactile/viewer", "max_rate", 0.0)
+            shown = drawn()
+            row = measure("2b page, no cap", chromium)
+            row["page_fps"] = (drawn() - shown) / (args.seconds + args.settle)
         reader = ReadingClient(url)
-        row = measure("2b reading client")
+        row = measure("2c reading client")
         reader.close()
         row["page_fps"] = reader.frames / (args.seconds + args.settle)
         frozen = stalled_client(port, ask=False)
@@ -334,7 +369,8 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, phases, repor
     print(f"viewer benchmark: replay -> decoder at {_frame_rate(args.bag) * args.rate:.0f} Hz "
           f"nominal ({args.bag.name}, looping), phases of {args.seconds:g} s after "
           f"{args.settle:g} s, stall {args.stall:g} s, Chromium at nice {args.browser_nice}; "
-          f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+          f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs now (per phase: "
+          f"at its end); CPU in % of one CPU, the decoder's with its camera workers")
     for _, row in rows:
         w0, w1 = row["window"]
         lat = np.array([ms for stamp, ms in clouds.arrivals if w0 <= stamp < w1] or [np.nan])
@@ -347,7 +383,8 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, phases, repor
         cpu = ", ".join(f"{k} {v:.0f} %" for k, v in row["cpu"].items())
         change = 100 * (row["fps"] - base) / base if base else float("nan")
         print(f"{name:<20} decoded {row['fps']:5.1f} frames/s ({change:+5.1f} %); "
-              f"latency median {row['lat50']:.1f} ms, p90 {row['lat90']:.1f} ms; CPU: {cpu}")
+              f"latency median {row['lat50']:.1f} ms, p90 {row['lat90']:.1f} ms; load "
+              f"{row['load']:.2f}; CPU: {cpu}")
         if "page_fps" in row:
             print(f"{'':<20} the page got {row['page_fps']:.1f} frames/s")
         if row.get("rss"):

@@ -35,6 +35,9 @@ def register(subparsers: Any, summary: str | None = None) -> None:
     p.add_argument("--host", default="127.0.0.1",
                    help="address to serve on (default 127.0.0.1: this computer only)")
     p.add_argument("--port", type=int, default=8080, help="TCP port (default 8080; 0 = any)")
+    p.add_argument("--max-rate", type=float, default=0.0, metavar="FPS",
+                   help="frames a second sent to each page at most (default 0: as many as "
+                        "the page asks for)")
     p.add_argument("--namespace", default="/tactile", help="topic namespace of the bag")
     p.add_argument("--decode", choices=("auto", "always", "never"), default="auto",
                    help="decode the images here: auto (when the bag has no recorded "
@@ -53,6 +56,9 @@ def register(subparsers: Any, summary: str | None = None) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Serve until Ctrl-C or SIGTERM (status 0); 1 on a bad bag, file or address."""
+    if args.max_rate < 0:
+        print("tactile-sl view: --max-rate must be 0 (no cap) or more", file=sys.stderr)
+        return 1
 
     def progress(done: int, total: int) -> None:
         if not args.no_progress:
@@ -72,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     rows, cols = pattern.array.shape
     builder = PacketBuilder(PadGeometry(int(rows), int(cols), float(pattern.pitch_m)),
                             source.namespace.strip("/"))
-    server = ViewerServer(source, builder, args.host, args.port)
+    server = ViewerServer(source, builder, args.host, args.port, max_rate=args.max_rate)
     try:
         url = server.start()
     except OSError as exc:

@@ -4,12 +4,14 @@ Read-only: the server answers GET for the page's three files and the WebSocket, 
 else; what a page may send is "next frame please" (with the map it shows) and, for a bag,
 which frame to show.  No parameter, file or topic can be changed from it.
 
-The browser sets the pace: a page asks for the next frame when it has drawn the last one,
-and only then is a frame converted and encoded (in one worker thread, once per frame for
-all pages).  A page that stops asking costs nothing; one that asks and does not read blocks
-only its own sender (one message in flight, dropped after ``send_timeout``), and the
-heartbeat closes a connection whose browser vanished.  Frames that arrive in between are
-never queued: the page gets the newest one.
+The browser sets the pace, within a cap: a page asks for the next frame when it has drawn
+the last one, and only then is a frame converted and encoded (in one worker thread, once per
+frame for all pages); the server sends each page at most ``max_rate`` frames a second (0 =
+no cap; changeable while serving), holding a request until the page's next send is due and
+then sending the newest frame.  A page that stops asking costs nothing; one that asks and
+does not read blocks only its own sender (one message in flight, dropped after
+``send_timeout``), and the heartbeat closes a connection whose browser vanished.  Frames
+that arrive in between are never queued: the page gets the newest one.
 """
 from __future__ import annotations
 
@@ -59,6 +61,7 @@ class _Client:
     map_kind: str = "pressure"
     last_key: Any = None
     sent: int = 0
+    last_send: float = float("-inf")     # loop time of the last send (the cap counts from it)
 
 
 class ViewerServer:
@@ -66,7 +69,8 @@ class ViewerServer:
 
     def __init__(self, source: FrameSource, builder: PacketBuilder, host: str = "127.0.0.1",
                  port: int = 8080, max_clients: int = 4, send_timeout: float = 10.0,
-                 idle_s: float = 1.0, heartbeat_s: float = 10.0) -> None:
+                 idle_s: float = 1.0, heartbeat_s: float = 10.0, max_rate: float = 0.0
+                 ) -> None:
         self.source = source
         self.builder = builder
         self.host = host
@@ -75,6 +79,7 @@ class ViewerServer:
         self.send_timeout = float(send_timeout)
         self.idle_s = float(idle_s)
         self.heartbeat_s = float(heartbeat_s)
+        self.max_rate = float(max_rate)   # frames/s to each page, 0 = no cap (any thread)
         self._files = {path: (resources.files(__package__).joinpath("static", name)
                               .read_bytes(), kind)
                        for path, (name, kind) in STATIC_FILES.items()}
@@ -236,16 +241,35 @@ class ViewerServer:
         return False
 
     async def _send_loop(self, client: _Client) -> None:
+        loop = asyncio.get_running_loop()
         try:
             while not client.ws.closed:
                 await client.want.wait()
                 client.want.clear()
+                await self._pace(client)
                 packet = await self._next_packet(client)
+                client.last_send = loop.time()
                 await asyncio.wait_for(client.ws.send_bytes(packet), self.send_timeout)
                 client.sent += 1
                 self.frames_sent += 1
         except (asyncio.TimeoutError, ConnectionError, RuntimeError):
             await client.ws.close(code=1008, message=b"page too slow to read")
+
+    async def _pace(self, client: _Client) -> None:
+        """Wait until this page's next send is due: at most ``max_rate`` a second.
+
+        Frames that arrive meanwhile are not queued (the page then gets the newest); the
+        wait is re-read every 0.25 s, so a live change of ``max_rate`` applies at once.
+        """
+        loop = asyncio.get_running_loop()
+        while True:
+            rate = self.max_rate
+            if rate <= 0:
+                return
+            wait = client.last_send + 1.0 / rate - loop.time()
+            if wait <= 0:
+                return
+            await asyncio.sleep(min(wait, 0.25))
 
     async def _next_packet(self, client: _Client) -> bytes:
         """The newest frame this page has not seen, or figures only after ``idle_s``."""

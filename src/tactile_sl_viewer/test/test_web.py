@@ -147,3 +147,63 @@ def test_a_port_in_use_is_one_clear_error():
         with pytest.raises(OSError, match=f"127.0.0.1:{port}"):
             srv.start()
         srv.stop()
+
+
+def test_each_page_gets_at_most_max_rate_frames_a_second_and_a_live_change_applies():
+    """Frames arrive at 100 Hz and the page asks again as soon as one lands: with
+    ``max_rate`` 5 it gets about 5 a second (the newest each time); with 0 (set while it
+    is connected) as many as it can read."""
+    source = Source()
+    srv = ViewerServer(source, PacketBuilder(msgs.PAD, "tactile"), "127.0.0.1", 0,
+                       idle_s=0.3, max_rate=5.0)
+    srv.start()
+    window = 2.0
+
+    async def frames_in(ws, seconds):
+        loop = asyncio.get_running_loop()
+        end, count, stamps = loop.time() + seconds, 0, []
+        while loop.time() < end:
+            await ws.send_str(json.dumps({"type": "next"}))
+            header, _ = unpack((await ws.receive()).data)
+            if "stamp" in header:
+                count += 1
+                stamps.append(header["stamp"])
+        return count, stamps
+
+    async def go():
+        stop = asyncio.Event()
+
+        async def camera():                  # a new frame every 10 ms
+            k = 1
+            while not stop.is_set():
+                add_frame(source, k * S)
+                k += 1
+                await asyncio.sleep(0.01)
+
+        feeder = asyncio.create_task(camera())
+        try:
+            async with aiohttp.ClientSession() as http:
+                async with http.ws_connect(server_url(srv)) as ws:
+                    await ws.receive()                       # hello
+                    capped, stamps = await frames_in(ws, window)
+                    srv.max_rate = 0.0
+                    await frames_in(ws, 0.3)                 # the change lands
+                    uncapped, _ = await frames_in(ws, window)
+        finally:
+            stop.set()
+            await feeder
+        return capped, stamps, uncapped
+
+    try:
+        capped, stamps, uncapped = run(go())
+    finally:
+        srv.stop()
+    # 5/s over 2 s: the first at once, then one every 0.2 s (11 at most, with slack for the
+    # last request in flight); a loaded machine may send fewer, never more
+    assert 5 <= capped <= 12, capped
+    assert len(set(stamps)) == len(stamps)             # never the same frame twice
+    assert uncapped > 2 * capped, (capped, uncapped)
+
+
+def server_url(srv):
+    return srv.url + "ws"

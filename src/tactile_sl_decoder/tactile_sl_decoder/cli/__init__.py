@@ -36,6 +36,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
                  "ground truth"),
     "replay": ("tactile_sl_decoder.cli.replay_cmd",
                "decode a bag offline into /tactile/points (same pipeline as the node)"),
+    "view": ("tactile_sl_viewer.view_cmd",      # the viewer package's (left out when absent)
+             "a recorded bag in the browser viewer, with a frame slider (a bag of images "
+             "only is decoded first)"),
 }
 """Every subcommand; one whose package is not installed is left out."""
 

@@ -11,7 +11,8 @@ Subscribes (relative names; only while a page is open, and ``linger`` seconds af
     slip                     tactile_sl_msgs/Slip         (when this build has the message)
     /diagnostics             diagnostic_msgs/DiagnosticArray
 
-and serves one page on ``http://host:port/`` (default 127.0.0.1:8080).  Every subscription
+and serves one page on ``http://host:port/`` (default 127.0.0.1:8080), at most ``max_rate``
+frames a second to each page (default 10).  Every subscription
 is best effort with a short queue: the decoder's reliable publishers never wait for this
 node, and a callback only files the message by stamp (:mod:`tactile_sl_viewer.assembly`);
 converting and encoding happen when a page asks for the next frame
@@ -100,9 +101,16 @@ class ViewerNode(Node):
             "Smallest top of the pressure colour scale, kPa (an untouched pad stays dark).",
             (0.001, 1e6),
             apply=lambda v: setattr(self.builder, "min_pressure_scale_kpa", float(v))))
+        max_rate = float(decl("max_rate", 10.0,
+            "Frames a second sent to each page at most (0 = as many as the page asks for); "
+            "a request waits until the page's next frame is due, then the newest frame goes "
+            "(the ones between are dropped). The cap keeps a browser on the sensor's own "
+            "computer from drawing frames the decoder needs the CPU for.", (0.0, 1000.0),
+            apply=lambda v: setattr(self.server, "max_rate", float(v))))
         self.assembler = FrameAssembler()
         self.source = LiveSource(self.assembler, self.get_namespace())
-        self.server = ViewerServer(self.source, self.builder, host, port, max_pages)
+        self.server = ViewerServer(self.source, self.builder, host, port, max_pages,
+                                   max_rate=max_rate)
         self._subscriptions: list[Any] = []
         self._last_page = -1e9
         self._last_warn = -1e9

@@ -1,13 +1,32 @@
 // tactile-sl live view: draws the frames the viewer node sends over one WebSocket.
 // Flow control: the page asks for the next frame ("next") only once it has drawn the last
-// one, on the next animation frame, so the server encodes at this page's pace; a hidden
-// tab (no animation frames) stops asking. Message layout: see packets.py.
+// one, on the next animation frame, so the server encodes at this page's pace (and sends
+// at most its max_rate frames a second); a hidden tab (no animation frames) stops asking.
+// Message layout: see packets.py.
+// Cheap to draw (the browser may share the sensor's cores): opaque canvases at their native
+// size (CSS scales them), text and lists written only when they changed, the colour bar and
+// scale drawn once per map layout, the force and slip drawings only when their values
+// moved, the stream figures twice a second.
 "use strict";
 
 (() => {
-  const $ = (id) => document.getElementById(id);
+  const elements = {};
+  const $ = (id) => elements[id] || (elements[id] = document.getElementById(id));
+  const contexts = {};
+  // every canvas is opaque (each drawing fills its background): no alpha to composite
+  const ctx2d = (id) => contexts[id] || (contexts[id] = $(id).getContext("2d", { alpha: false }));
+  const written = new Map();
+  // text of an element, written only when it changed (no style, layout or paint otherwise)
+  const setText = (id, text) => {
+    if (written.get(id) === text) return;
+    written.set(id, text);
+    $(id).textContent = text;
+  };
   const state = { ws: null, hello: null, mapKind: "pressure", shown: [], frames: 0,
-                  bagIndex: 0, playing: null, lastAsk: 0 };
+                  bagIndex: 0, playing: null, lastAsk: 0, mapLayout: null, mapVmax: null,
+                  forceKey: null, slipKey: null, statsAt: -1e9, diagKey: null, errorsKey: "[]",
+                  img: null };
+  const STATS_PERIOD_MS = 500;               // stream figures: twice a second
   // ?fps=N: ask for at most N frames a second (a slow computer, a metered link)
   const maxFps = Number(new URLSearchParams(location.search).get("fps")) || 0;
   const CLASS_RGB = ["rgb(230,60,60)", "rgb(60,200,60)", "rgb(40,140,230)"];
@@ -117,8 +136,8 @@
     drawMap(h, blobs);
     drawForce(h);
     drawSlip(h);
-    $("stamp").textContent = h.stamp;
-    $("points").textContent = h.points === undefined ? "–" : String(h.points);
+    setText("stamp", h.stamp);
+    setText("points", h.points === undefined ? "–" : String(h.points));
     if (h.bag) showBagPosition(h.bag);
     const now = performance.now();
     state.shown.push(now);
@@ -129,7 +148,7 @@
   }
 
   async function drawCamera(h, blobs) {
-    const canvas = $("camera"), ctx = canvas.getContext("2d");
+    const canvas = $("camera"), ctx = ctx2d("camera");
     if (blobs.image) {
       const bitmap = await createImageBitmap(blobs.image);
       if (canvas.width !== bitmap.width || canvas.height !== bitmap.height) {
@@ -147,7 +166,7 @@
     }
     const u = blobs.glyph_u, v = blobs.glyph_v, label = blobs.glyph_label;
     const decoded = blobs.glyph_decoded;
-    if (!u) { $("glyph-count").textContent = ""; return; }
+    if (!u) { setText("glyph-count", ""); return; }
     // one path per colour and kind: a few draw calls for hundreds of glyphs
     for (let cls = 0; cls <= 3; cls++) {
       const colour = cls < 3 ? CLASS_RGB[cls] : UNKNOWN_RGB;
@@ -163,35 +182,66 @@
       ctx.fill(filled);
       ctx.stroke(ring);
     }
-    $("glyph-count").textContent = ` (${h.glyphs.count} glyphs, ${h.glyphs.decoded} decoded)`;
+    setText("glyph-count", ` (${h.glyphs.count} glyphs, ${h.glyphs.decoded} decoded)`);
   }
 
   // ------------------------------------------------------------------ pressure / depth map
 
   function drawMap(h, blobs) {
-    const canvas = $("map"), ctx = canvas.getContext("2d");
+    const canvas = $("map"), ctx = ctx2d("map");
     const W = canvas.width, H = canvas.height;
-    ctx.fillStyle = "#000";
-    ctx.fillRect(0, 0, W, H);
-    canvas.dataset.kind = state.mapKind;
+    if (canvas.dataset.kind !== state.mapKind) canvas.dataset.kind = state.mapKind;
     const m = h.map;
     const data = m && (m.kind === "depth" ? blobs.depth : blobs.pressure);
     if (!m || !data || m.kind !== state.mapKind) {
+      const note = state.mapKind === "depth" ? "no depth map for this frame"
+        : "no force field for this frame";
+      if (state.mapLayout === note) return;
+      state.mapLayout = note;
+      ctx.fillStyle = "#000";
+      ctx.fillRect(0, 0, W, H);
       ctx.fillStyle = "#888";
       ctx.font = "16px sans-serif";
-      ctx.fillText(state.mapKind === "depth" ? "no depth map for this frame"
-                   : "no force field for this frame", 20, 30);
+      ctx.fillText(note, 20, 30);
       return;
     }
     const [rows, cols] = m.shape;
     const bar = 56, margin = 18;
     const s = Math.min((W - bar - 2 * margin) / cols, (H - 2 * margin - 24) / rows);
     const x0 = margin, y0 = margin;
+    const table = LUTS[m.kind];
+    const pad = h.pad;
+    const perCell = m.kind === "depth" ? (rows - 1) / Math.max(pad.rows - 1, 1) : 1;
+    const layout = `${m.kind} ${rows}x${cols} ${m.unit} ${pad.pitch}`;
+    if (state.mapLayout !== layout) {       // the parts that stay: drawn once per layout
+      state.mapLayout = layout;
+      state.mapVmax = null;
+      ctx.fillStyle = "#000";
+      ctx.fillRect(0, 0, W, H);
+      colourBar(ctx, table, W - bar + 8, y0, 14, rows * s, m.unit);
+      scaleBar(ctx, x0, y0 + rows * s + 16, s * perCell, pad.pitch);
+    }
+    const top = `${m.vmax < 10 ? m.vmax.toFixed(1) : Math.round(m.vmax)}`;
+    if (state.mapVmax !== top) {            // the scale's top: only when it changed
+      state.mapVmax = top;
+      ctx.fillStyle = "#000";
+      ctx.fillRect(W - bar, 0, bar, y0 - 1);
+      ctx.fillStyle = "#ddd";
+      ctx.font = "12px sans-serif";
+      ctx.fillText(top, W - bar + 4, y0 - 4);
+    }
+    // the map, its outline and centroid: cleared with a rim for the lines past its edge
+    const rim = 10;
+    ctx.fillStyle = "#000";
+    ctx.fillRect(x0 - rim, y0 - rim, cols * s + 2 * rim, rows * s + 2 * rim);
     if (!state.off) state.off = document.createElement("canvas");
     const off = state.off;
     if (off.width !== cols || off.height !== rows) { off.width = cols; off.height = rows; }
-    const img = off.getContext("2d").createImageData(cols, rows);
-    const table = LUTS[m.kind];
+    const offCtx = off.getContext("2d");
+    if (!state.img || state.img.width !== cols || state.img.height !== rows) {
+      state.img = offCtx.createImageData(cols, rows);
+    }
+    const img = state.img;
     for (let i = 0; i < rows; i++) {
       const dest = (rows - 1 - i) * cols;          // +y upwards
       for (let j = 0; j < cols; j++) {
@@ -205,12 +255,10 @@
         img.data[o + 3] = 255;
       }
     }
-    off.getContext("2d").putImageData(img, 0, 0);
+    offCtx.putImageData(img, 0, 0);
     ctx.imageSmoothingEnabled = m.kind === "depth";
     ctx.drawImage(off, x0, y0, cols * s, rows * s);
-    const pad = h.pad;
     // cell (i, j) of the pressure grid / pixel of the depth map -> canvas
-    const perCell = m.kind === "depth" ? (rows - 1) / Math.max(pad.rows - 1, 1) : 1;
     const toCanvas = (x, y) => {
       const j = x / pad.pitch + (pad.cols - 1) / 2, i = y / pad.pitch + (pad.rows - 1) / 2;
       const jj = m.kind === "depth" ? j * perCell : j, ii = m.kind === "depth" ? i * perCell : i;
@@ -226,8 +274,6 @@
       ctx.moveTo(cx - 9, cy); ctx.lineTo(cx + 9, cy); ctx.moveTo(cx, cy - 9); ctx.lineTo(cx, cy + 9);
       ctx.stroke();
     }
-    colourBar(ctx, table, W - bar + 8, y0, 14, rows * s, m.vmax, m.unit);
-    scaleBar(ctx, x0, y0 + rows * s + 16, s * (m.kind === "depth" ? perCell : 1), pad.pitch);
   }
 
   function outline(ctx, mask, rows, cols, x0, y0, s) {
@@ -249,7 +295,7 @@
     ctx.stroke();
   }
 
-  function colourBar(ctx, table, x, y, w, h, vmax, unit) {
+  function colourBar(ctx, table, x, y, w, h, unit) {
     for (let k = 0; k < h; k++) {
       const i = 3 * Math.round(255 * (1 - k / h));
       ctx.fillStyle = `rgb(${table[i]},${table[i + 1]},${table[i + 2]})`;
@@ -257,7 +303,6 @@
     }
     ctx.fillStyle = "#ddd";
     ctx.font = "12px sans-serif";
-    ctx.fillText(`${vmax < 10 ? vmax.toFixed(1) : Math.round(vmax)}`, x - 4, y - 4);
     ctx.fillText("0", x + 2, y + h + 14);
     ctx.fillText(unit, x - 2, y + h + 28);
   }
@@ -302,17 +347,21 @@
   }
 
   function drawForce(h) {
-    const canvas = $("force"), ctx = canvas.getContext("2d");
+    const w = h.wrench;
+    drawContact(h.contact);
+    // the drawing changes only with what it shows (to its resolution): redrawn only then
+    const key = w ? [...w.force, w.torque[2]].map((x) => x.toFixed(4)).join(" ") : "none";
+    if (key === state.forceKey) return;
+    state.forceKey = key;
+    const canvas = $("force"), ctx = ctx2d("force");
     const W = canvas.width, H = canvas.height, cx = W / 2 - 20, cy = H / 2, R = 120;
     ctx.fillStyle = "#111";
     ctx.fillRect(0, 0, W, H);
-    const w = h.wrench;
     if (!w) {
       ctx.fillStyle = "#888";
       ctx.font = "14px sans-serif";
       ctx.fillText("no wrench for this frame", 20, 30);
-      for (const id of ["normal-force", "shear-force", "moment"]) $(id).textContent = "–";
-      drawContact(h.contact);
+      for (const id of ["normal-force", "shear-force", "moment"]) setText(id, "–");
       return;
     }
     const [fx, fy, fz] = w.force, [mx, my, mz] = w.torque;
@@ -355,65 +404,80 @@
     ctx.fillStyle = "#999";
     ctx.fillText("Fn", bx - 2, by + bh + 14);
     ctx.fillText(`${normalScale} N`, bx - 14, by - bh - 6);
-    $("normal-force").textContent = normal.toFixed(3);
-    $("shear-force").textContent = `${fx.toFixed(3)}, ${fy.toFixed(3)}`;
-    $("moment").textContent = `${(1e3 * mx).toFixed(2)}, ${(1e3 * my).toFixed(2)}, ${(1e3 * mz).toFixed(2)}`;
-    drawContact(h.contact);
+    setText("normal-force", normal.toFixed(3));
+    setText("shear-force", `${fx.toFixed(3)}, ${fy.toFixed(3)}`);
+    setText("moment", `${(1e3 * mx).toFixed(2)}, ${(1e3 * my).toFixed(2)}, ${(1e3 * mz).toFixed(2)}`);
   }
 
   function drawContact(c) {
     if (!c) {
       for (const id of ["in-contact", "area", "centroid", "max-depth", "peak-pressure", "regions"])
-        $(id).textContent = "–";
+        setText(id, "–");
       return;
     }
-    $("in-contact").textContent = c.in_contact ? "yes" : "no";
-    $("area").textContent = fmt(c.area * 1e6, 1);
-    $("centroid").textContent = `${fmt(c.centroid[0] * 1e3, 2)}, ${fmt(c.centroid[1] * 1e3, 2)}`;
-    $("max-depth").textContent = fmt(c.max_depth * 1e6, 0);
-    $("peak-pressure").textContent = fmt(c.peak_pressure / 1e3, 1);
-    $("regions").textContent = c.regions.length
-      ? c.regions.map((r) => `${r.force.toFixed(2)} N`).join(", ") : "none";
+    setText("in-contact", c.in_contact ? "yes" : "no");
+    setText("area", fmt(c.area * 1e6, 1));
+    setText("centroid", `${fmt(c.centroid[0] * 1e3, 2)}, ${fmt(c.centroid[1] * 1e3, 2)}`);
+    setText("max-depth", fmt(c.max_depth * 1e6, 0));
+    setText("peak-pressure", fmt(c.peak_pressure / 1e3, 1));
+    setText("regions", c.regions.length
+      ? c.regions.map((r) => `${r.force.toFixed(2)} N`).join(", ") : "none");
   }
 
   // ------------------------------------------------------------------ slip
 
+  function setBadge(text, kind) {
+    setText("slip-state", text);
+    const badge = $("slip-state"), name = "badge " + kind;
+    if (badge.className !== name) badge.className = name;
+  }
+
   function drawSlip(h) {
-    const s = h.slip, canvas = $("slip-direction"), ctx = canvas.getContext("2d");
-    ctx.fillStyle = "#111";
-    ctx.fillRect(0, 0, canvas.width, canvas.height);
-    const badge = $("slip-state");
-    canvas.hidden = !s;
+    const s = h.slip, canvas = $("slip-direction");
+    if (canvas.hidden !== !s) canvas.hidden = !s;
     if (!s) {
-      badge.textContent = state.hello && state.hello.slip ? "no slip message" : "not published";
-      badge.className = "badge";
-      for (const id of ["stick-ratio", "slip-margin", "friction"]) $(id).textContent = "–";
+      setBadge(state.hello && state.hello.slip ? "no slip message" : "not published", "");
+      for (const id of ["stick-ratio", "slip-margin", "friction"]) setText(id, "–");
+      state.slipKey = null;
       return;
     }
-    badge.textContent = s.state_name;
-    badge.className = "badge " + s.state_name.replace(/ /g, "-");
-    $("stick-ratio").textContent = s.stick_ratio === null ? "–" : `${(100 * s.stick_ratio).toFixed(0)} %`;
-    $("slip-margin").textContent = s.slip_margin === null ? "–" : `${(100 * s.slip_margin).toFixed(0)} %`;
-    $("friction").textContent = fmt(s.friction_coefficient, 2);
+    setBadge(s.state_name, s.state_name.replace(/ /g, "-"));
+    setText("stick-ratio", s.stick_ratio === null ? "–" : `${(100 * s.stick_ratio).toFixed(0)} %`);
+    setText("slip-margin", s.slip_margin === null ? "–" : `${(100 * s.slip_margin).toFixed(0)} %`);
+    setText("friction", fmt(s.friction_coefficient, 2));
+    // the arrow: redrawn only when it moved (to a pixel's worth of its 35 px length)
     const [dx, dy] = s.direction, c = canvas.width / 2;
-    if (Math.hypot(dx, dy) > 1e-6) arrow(ctx, c, c, c + 35 * dx, c - 35 * dy, "rgb(255,120,120)", 3);
+    const moving = Math.hypot(dx, dy) > 1e-6;
+    const key = moving ? `${Math.round(35 * dx)} ${Math.round(35 * dy)}` : "still";
+    if (key === state.slipKey) return;
+    state.slipKey = key;
+    const ctx = ctx2d("slip-direction");
+    ctx.fillStyle = "#111";
+    ctx.fillRect(0, 0, canvas.width, canvas.height);
+    if (moving) arrow(ctx, c, c, c + 35 * dx, c - 35 * dy, "rgb(255,120,120)", 3);
   }
 
   // ------------------------------------------------------------------ stream figures
 
   function drawStats(h) {
-    const st = h.stats || {};
-    $("camera-hz").textContent = fmt(st.camera_hz, 1);
-    $("decoded-hz").textContent = fmt(st.decoded_hz, 1);
-    const n = state.shown.length;
-    const hz = n > 1 ? (n - 1) / ((state.shown[n - 1] - state.shown[0]) / 1000) : null;
-    $("shown-hz").textContent = fmt(hz, 1);
-    $("latency").textContent = st.latency_ms === null || st.latency_ms === undefined ? "–"
-      : `${st.latency_ms.toFixed(0)}, ${st.latency_p90_ms.toFixed(0)}`;
-    $("drops").textContent = st.dropped_total === undefined ? "–"
-      : `${st.dropped_10s} in 10 s, ${st.dropped_total} in all`;
-    $("pages").textContent = h.pages === undefined ? "–" : String(h.pages);
-    if (h.diagnostics) {
+    const now = performance.now();
+    if (now - state.statsAt >= STATS_PERIOD_MS) {  // figures over seconds: twice a second
+      state.statsAt = now;
+      const st = h.stats || {};
+      setText("camera-hz", fmt(st.camera_hz, 1));
+      setText("decoded-hz", fmt(st.decoded_hz, 1));
+      const n = state.shown.length;
+      const hz = n > 1 ? (n - 1) / ((state.shown[n - 1] - state.shown[0]) / 1000) : null;
+      setText("shown-hz", fmt(hz, 1));
+      setText("latency", st.latency_ms === null || st.latency_ms === undefined ? "–"
+        : `${st.latency_ms.toFixed(0)}, ${st.latency_p90_ms.toFixed(0)}`);
+      setText("drops", st.dropped_total === undefined ? "–"
+        : `${st.dropped_10s} in 10 s, ${st.dropped_total} in all`);
+      setText("pages", h.pages === undefined ? "–" : String(h.pages));
+    }
+    const diagKey = h.diagnostics ? JSON.stringify(h.diagnostics) : null;
+    if (diagKey !== null && diagKey !== state.diagKey) {  // the list: only when it changed
+      state.diagKey = diagKey;
       const list = $("diagnostics");
       list.replaceChildren(...h.diagnostics.map((d) => {
         const li = document.createElement("li"), level = document.createElement("span");
@@ -427,6 +491,9 @@
   }
 
   function showErrors(errors) {
+    const key = JSON.stringify(errors);
+    if (key === state.errorsKey) return;
+    state.errorsKey = key;
     $("errors").replaceChildren(...errors.map((e) => {
       const li = document.createElement("li");
       li.textContent = e;
@@ -459,7 +526,7 @@
   }
 
   function showBagPosition(bag) {
-    $("bag-position").textContent = `frame ${bag.index + 1} of ${bag.count}, t = ${bag.time_s.toFixed(2)} s`;
+    setText("bag-position", `frame ${bag.index + 1} of ${bag.count}, t = ${bag.time_s.toFixed(2)} s`);
     if (!state.playing && document.activeElement !== $("slider")) $("slider").value = String(bag.index);
   }
 
