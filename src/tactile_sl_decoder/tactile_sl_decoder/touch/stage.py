@@ -50,7 +50,12 @@ from tactile_sl_decoder.touch.sensor import SensorConfig
 from tactile_sl_decoder.touch.slip import SlipEstimate, SlipEstimator, SlipParams
 from tactile_sl_decoder.touch.solver_cache import SolverCache
 from tactile_sl_decoder.touch.traction import TractionParams, TractionSolver
-from tactile_sl_decoder.touch.weights import CellWeights, WeightParams
+from tactile_sl_decoder.touch.weights import (
+    CellWeights,
+    ReferenceNoise,
+    WeightParams,
+    reference_noise,
+)
 
 
 @dataclass
@@ -105,8 +110,11 @@ class Reference:
     pose: PadPose
     frames: int
     nominal: np.ndarray      # (N, 3) nominal rest positions (z = 0): where tractions act
-    weights: CellWeights | None = None
-    """each cell's expected displacement error and the cleaning (:mod:`.weights`)"""
+    weights: CellWeights | None
+    """each cell's expected displacement error and the cleaning (:mod:`.weights`); None
+    with the weights off"""
+    noise: ReferenceNoise
+    """what those errors give the resultant's moments, the map and the contact area"""
 
 
 @dataclass
@@ -199,10 +207,6 @@ class TouchStage:
         self.last_solve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._index = np.full(self.shape[0] * self.shape[1], -1, np.int64)
         self._last_solver: TractionSolver | None = None
-        self._moment_noise = (0.0, 0.0)
-        self._map_noise: np.ndarray | None = None
-        self._support_noise: np.ndarray | None = None
-        self._centroid_noise: np.ndarray | None = None
         self.solver_cache = (SolverCache(self.params.solver_cache_dir or None)
                              if self.params.solver_cache else None)
         all_rows, all_cols = np.divmod(np.arange(self.shape[0] * self.shape[1]), self.shape[1])
@@ -301,7 +305,10 @@ class TouchStage:
         if solver is None:
             solver = TractionSolver(self.sensor.elastomer, self.pitch, self.shape, cells,
                                     self.params.traction, self.mirrored, self.solver_cache)
-        return cells, rest, pose, frames, nominal, solver
+        weights = (CellWeights(solver.rows, solver.cols, self.shape, rest, nominal, frames,
+                               self.params.weights) if self.params.weights.enabled else None)
+        noise = reference_noise(weights, solver, self.params.contact.displacement_noise)
+        return cells, rest, pose, frames, nominal, solver, weights, noise
 
     def _reusable_solver(self, cells: np.ndarray) -> TractionSolver | None:
         """The last reference's inversion if it was made for these very cells."""
@@ -312,7 +319,7 @@ class TouchStage:
         return last
 
     def _set_reference(self, prepared: tuple[Any, ...]) -> None:
-        cells, rest, pose, frames, nominal, solver = prepared
+        cells, rest, pose, frames, nominal, solver, weights, noise = prepared
         self.solver = solver
         self._area_fraction = solver.area_fraction
         self._index[:] = -1
@@ -321,30 +328,7 @@ class TouchStage:
                                                         self.shape[1]),
                                              self.shape, self.pitch, self.mirrored)
         self._rest_table[cells] = rest
-        weights = CellWeights(solver.rows, solver.cols, self.shape, rest, nominal, frames,
-                              self.params.weights)
-        self.reference = Reference(cells, rest, pose, frames, nominal, weights)
-        # the noise of the resultant's moments and of each cell's map force, from the
-        # cells' expected errors (the contact state's centroid and ripples); the moments'
-        # never below that of ``displacement_noise`` on every cell (a clean pad: as before)
-        noise = self.params.contact.displacement_noise
-        mx, my = weights.propagated(solver.moment_rows()) / noise
-        self._moment_noise = (max(float(mx), solver.moment_noise[0]),
-                              max(float(my), solver.moment_noise[1]))
-        self._map_noise = weights.propagated(solver.normal_map_rows())
-        # the map noise beyond displacement_noise's: the map centroid's uncertainty (only
-        # on a pad with noisy cells, like the support's noise below)
-        clean = noise * np.sqrt(np.sum(np.square(solver.normal_map_rows(), dtype=np.float64),
-                                       axis=1))
-        self._centroid_noise = (None if len(weights.noisy) == 0 else
-                                np.sqrt(np.maximum(self._map_noise ** 2 - clean ** 2, 0.0)))
-        # each cell's constrained pressure noise (the contact area's support), never below
-        # that of displacement_noise on every cell; only on a pad with noisy cells (on a
-        # clean one the single reference frame's roughness is no better than the setting)
-        rows = solver.support_pressure_rows()
-        self._support_noise = (None if rows is None or len(weights.noisy) == 0 else
-                               np.maximum(weights.propagated(rows),
-                                          noise * solver.support_gain))
+        self.reference = Reference(cells, rest, pose, frames, nominal, weights, noise)
 
     @property
     def contact_params(self) -> ContactParams:
@@ -418,8 +402,7 @@ class TouchStage:
         valid = np.zeros(n, bool)
         disp_ref[k[known]] = displacement[known]
         valid[k[known]] = True
-        weighted = self.params.weights.enabled and ref.weights is not None
-        if weighted and ref.weights is not None and len(ref.weights.noisy):
+        if ref.weights is not None and len(ref.weights.noisy):
             disp_ref = ref.weights.clean(self.solver.fill_missing(disp_ref, valid))
             displacement[known] = disp_ref[k[known]]
         t1 = time.perf_counter()
@@ -432,7 +415,8 @@ class TouchStage:
         indent[rows, cols] = -displacement[:, 2]
         contact_params = self.contact_params
         noise = contact_params.displacement_noise
-        cell_noise = self._support_noise if weighted else None
+        ref_noise = ref.noise
+        cell_noise = ref_noise.support
         pressure = self.solver.support_pressure(noise, contact_params.support_sigmas,
                                                 contact_params.support_edge_snr,
                                                 cell_noise=cell_noise)
@@ -440,10 +424,8 @@ class TouchStage:
             pressure, noise * self.solver.support_gain if cell_noise is None else cell_noise)
         contact = contact_state(ref.nominal[:, :2], ref_rows, ref_cols, forces_ref, wrench,
                                 self.shape, self.pitch, indent, self._in_contact,
-                                contact_params,
-                                self._moment_noise if weighted else self.solver.moment_noise,
-                                support, self._map_noise if weighted else None,
-                                self._centroid_noise if weighted else None)
+                                contact_params, ref_noise.moment, support, ref_noise.map,
+                                ref_noise.centroid)
         self._in_contact = contact.in_contact
         depth = self._depth(indent)
         force = np.zeros((len(rows), 3))

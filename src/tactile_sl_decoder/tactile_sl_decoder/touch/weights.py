@@ -47,6 +47,7 @@ map, contact area, centroid and indentation all come from it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -203,8 +204,8 @@ def _stencils(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], weight
 class CellWeights:
     """The per-cell weights of one reference: expected errors and the cleaning stencils.
 
-    Built once per reference (:meth:`TouchStage._set_reference`, a few ms): ``error`` (N, 3)
-    m, each cell's expected displacement error; ``noisy`` the cells cleaned in every frame
+    Built once per reference, in its background preparation (a few ms): ``error`` (N, 3) m,
+    each cell's expected displacement error; ``noisy`` the cells cleaned in every frame
     (expected error above ``noisy_factor`` x ``min_error``) with their stencils; ``effective``
     (N, 3) m, the expected error after cleaning (a cleaned cell's combination of its own
     value and its neighbours' fit: 1 / (1 / sigma^2 + 1 / prediction variance)), which gives
@@ -269,3 +270,45 @@ class CellWeights:
         var = (self.effective.reshape(-1) ** 2).astype(r.dtype)
         return np.sqrt(np.asarray((r * r) @ var, np.float64))
 
+
+@dataclass
+class ReferenceNoise:
+    """What a reference's cells' expected errors give the touch outputs (all fixed at tare).
+
+    ``moment`` (2,): the resultant's M_x, M_y noise in units of ``displacement_noise``;
+    ``map`` (N,) N: each cell's map-force noise (the contact state's ripples); ``centroid``
+    (N,) N: that beyond ``displacement_noise``'s (the map centroid's uncertainty) and
+    ``support`` (N,) N: each cell's constrained-pressure noise (the contact area), both only
+    on a pad with noisy cells. Without weights: the solver's ``moment`` and nothing else.
+    """
+
+    moment: tuple[float, float]
+    map: np.ndarray | None = None
+    centroid: np.ndarray | None = None
+    support: np.ndarray | None = None
+
+
+def reference_noise(weights: CellWeights | None, solver: Any,
+                    displacement_noise: float) -> ReferenceNoise:
+    """The noise model of a reference from its :class:`CellWeights` and its inversion.
+
+    ``solver``: the reference's :class:`~tactile_sl_decoder.touch.traction.TractionSolver`.
+    The moments' noise is never below that of ``displacement_noise`` on every cell (a clean
+    pad: as without weights), nor is the support's.
+    """
+    if weights is None:
+        return ReferenceNoise(tuple(solver.moment_noise))
+    mx, my = weights.propagated(solver.moment_rows()) / displacement_noise
+    moment = (max(float(mx), solver.moment_noise[0]), max(float(my), solver.moment_noise[1]))
+    map_noise = weights.propagated(solver.normal_map_rows())
+    if len(weights.noisy) == 0:
+        # on a clean pad the single reference frame's roughness is no better than the
+        # setting: the centroid's and the support's noise stay displacement_noise's
+        return ReferenceNoise(moment, map_noise)
+    clean = displacement_noise * np.sqrt(np.sum(np.square(solver.normal_map_rows(),
+                                                          dtype=np.float64), axis=1))
+    centroid = np.sqrt(np.maximum(map_noise ** 2 - clean ** 2, 0.0))
+    rows = solver.support_pressure_rows()
+    support = (None if rows is None else
+               np.maximum(weights.propagated(rows), displacement_noise * solver.support_gain))
+    return ReferenceNoise(moment, map_noise, centroid, support)
