@@ -23,7 +23,8 @@ _KERNELS: list[Any] = []
 KERNEL_MODULES = ("tactile_sl_decoder.neighbours", "tactile_sl_decoder.extract.spacing",
                   "tactile_sl_decoder.extract.patches",
                   "tactile_sl_decoder.decode.links", "tactile_sl_decoder.decode.votes",
-                  "tactile_sl_decoder.stereo.outliers", "tactile_sl_decoder.touch.support",
+                  "tactile_sl_decoder.stereo.stereo", "tactile_sl_decoder.stereo.outliers",
+                  "tactile_sl_decoder.touch.support",
                   "tactile_sl_decoder.touch.contact")
 """The modules that define kernels: importing them compiles (or loads) every kernel."""
 
