@@ -171,8 +171,8 @@ def _centre(P: np.ndarray) -> np.ndarray | None:
 
 
 def _reproj(P: np.ndarray, x: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    proj = x @ P[:, :3].T + P[:, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):   # degenerate pairs
+        proj = x @ P[:, :3].T + P[:, 3]
         pix = proj[:, :2] / proj[:, 2:3]
         err = np.linalg.norm(pix - uv, axis=1)
     return np.where(np.isfinite(err) & (proj[:, 2] > 0), err, np.inf)
