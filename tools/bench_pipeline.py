@@ -9,9 +9,12 @@
 In-process: median milliseconds per stereo pair with the per-stage breakdown (check,
 extraction, classification, lattice + decoding, stereo), over every frame of the bags,
 and the end-to-end accuracy table (coverage, wrong cells, 3-D error against ground truth).
-With --threads 2 (the default, as the node) each image runs in its own worker: extract,
+With --threads 2 (the default) each image runs in its own worker thread: extract,
 knn (the lattice's k-NN search + rectification of the glyph centres) and classify are then
 the slower worker's times, which overlap; "workers" is the wall time of that part.
+With --processes each image's worker is a process of its own, as in the live decoder node
+(no interpreter lock shared between the two images; the images go through shared memory
+and the glyphs come back pickled), and cpu+touch counts the workers' CPU time too.
 With touch outputs (the default; --no-touch leaves them out) the touch stage runs after
 every frame as in the node and replay ("touch", of which "slip" is the slip estimate,
 "total+touch"; "cpu+touch" is the process CPU time of both). In the same run and on the same
@@ -113,7 +116,7 @@ def _pipeline(args: argparse.Namespace, carry: bool = True):
     from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 
     params = PipelineParams(threads=args.threads, cpu_threads=args.cpu_threads,
-                            classifier_weights=args.classifier)
+                            classifier_weights=args.classifier, processes=args.processes)
     params.decode.mirrored = args.mirrored
     params.carry.enabled = carry
     return StereoPipeline(PatternSpec.load(args.pattern), None, params)
@@ -244,12 +247,12 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
                 stage = step.touch.stage if step.touch is not None else None
                 metrics = []
                 for fr, left, right in frames:
-                    c0 = time.process_time()
+                    c0 = _cpu_seconds(pipe)
                     t0 = time.perf_counter()
                     out = step.process(left, right, fr.left_info, fr.right_info,
                                        on_points=points_ready)
                     t2 = time.perf_counter()
-                    c1 = time.process_time()
+                    c1 = _cpu_seconds(pipe)
                     t1 = points_at[-1]
                     res, touch = out.stereo, out.touch.result
                     if last and fr.ground_truth is not None:
@@ -290,7 +293,9 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
     load1 = os.getloadavg()
     n_pairs = len(timings[modes[0]]["total"])
     print(f"in-process, {n_pairs} stereo pairs per setting (median glyphs per pair "
-          f"{int(np.median(glyphs))}), threads={args.threads}, cpu_threads={args.cpu_threads}, "
+          f"{int(np.median(glyphs))}), "
+          f"{'camera processes' if args.processes else f'threads={args.threads}'}, "
+          f"cpu_threads={args.cpu_threads}, "
           f"{time.perf_counter() - t_run:.0f} s; load average {load0[0]:.2f} before, "
           f"{load1[0]:.2f} after, on {os.cpu_count()} CPUs")
     for mode in modes:
@@ -326,6 +331,23 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
     for pipe in pipes.values():
         pipe.close()
     return 0
+
+
+def _cpu_seconds(pipe) -> float:
+    """CPU seconds of this process and, with camera processes, of its worker processes.
+
+    The workers' from /proc/<pid>/task/*/schedstat (nanoseconds on the CPU; the tick-based
+    counters of /proc/<pid>/stat are too coarse for one frame).
+    """
+    total = time.process_time()
+    procs = getattr(pipe, "_procs", None)
+    for proc in (procs._procs if procs is not None else []):
+        for task in pathlib.Path(f"/proc/{proc.pid}/task").glob("*/schedstat"):
+            try:
+                total += int(task.read_text().split()[0]) * 1e-9
+            except (OSError, ValueError, IndexError):
+                pass                       # a thread that just ended
+    return total
 
 
 def _row(label: str, values: list[float]) -> None:
@@ -484,6 +506,10 @@ def main() -> int:
     p.add_argument("--mirrored", action="store_true")
     p.add_argument("--threads", type=int, default=2,
                    help="pipeline worker threads for the two images (default 2, as the node)")
+    p.add_argument("--processes", action="store_true",
+                   help="each camera's extraction, k-NN and classification in a worker "
+                        "process, as the live decoder node runs them (default: --threads); "
+                        "cpu+touch then adds the workers' CPU time")
     p.add_argument("--cpu-threads", type=int, default=1,
                    help="OpenCV / BLAS intra-op threads (0 = library defaults)")
     p.add_argument("--repeat", type=int, default=3, help="timed runs per frame")

@@ -211,18 +211,21 @@ class CameraProcesses:
             block = self._image_block(i, images[i].nbytes)
             np.copyto(np.ndarray(images[i].shape, np.uint8, buffer=_view(block)), images[i])
             conn.send(("frame", (jobs[i], block.name, self._results[i].name)))
-        replies = []
-        for conn, proc in zip(self._conns, self._procs):     # both, before raising
-            try:
-                replies.append(conn.recv())
+        out: list[Any] = []
+        error: BaseException | None = None
+        for conn, proc, result in zip(self._conns, self._procs, self._results):
+            try:                                # both replies, before raising
+                status, value = conn.recv()
             except (EOFError, OSError):
                 raise RuntimeError(f"the {proc.name} worker process ended (exit code "
                                    f"{proc.exitcode})") from None
-        out = []
-        for (status, value), result in zip(replies, self._results):
             if status == "error":
-                raise value
-            out.append(pickle.loads(value if status == "inline" else _view(result)[:value]))
+                error = error or value
+            elif error is None:                 # unpickled while the other camera works
+                out.append(pickle.loads(value if status == "inline"
+                                        else _view(result)[:value]))
+        if error is not None:
+            raise error
         return out[0], out[1]
 
     def _image_block(self, i: int, size: int) -> SharedMemory:

@@ -14,12 +14,17 @@ import time
 from typing import Any, Callable
 
 import numba
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 
 _KERNELS: list[Any] = []
 
 KERNEL_MODULES = ("tactile_sl_decoder.neighbours", "tactile_sl_decoder.extract.spacing",
+                  "tactile_sl_decoder.extract.patches",
                   "tactile_sl_decoder.decode.links", "tactile_sl_decoder.decode.votes",
-                  "tactile_sl_decoder.stereo.outliers", "tactile_sl_decoder.touch.support",
+                  "tactile_sl_decoder.stereo.stereo", "tactile_sl_decoder.stereo.outliers",
+                  "tactile_sl_decoder.touch.support",
                   "tactile_sl_decoder.touch.contact")
 """The modules that define kernels: importing them compiles (or loads) every kernel."""
 
@@ -39,6 +44,26 @@ def kernel(signature: str | list[str]) -> Callable[[Callable[..., Any]], Any]:
 def helper(fn: Callable[..., Any]) -> Any:
     """A function only kernels call: compiled into each caller (typed by the call)."""
     return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
+
+
+def _fma32(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
+    """A * b + c in float32 with one rounding (LLVM's ``llvm.fma.f32``), inside kernels.
+
+    For kernels that must give the bits of library code using fused multiply-adds (OpenCV's
+    SIMD interpolation): without ``fastmath`` numba never fuses a product and a sum itself.
+    IEEE 754-2008, sec. 5.4.1 (fusedMultiplyAdd).
+    """
+    sig = types.float32(types.float32, types.float32, types.float32)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        fnty = ir.FunctionType(ir.FloatType(), [ir.FloatType()] * 3)
+        return builder.call(cgutils.get_or_insert_function(builder.module, fnty,
+                                                           "llvm.fma.f32"), args)
+    return sig, codegen
+
+
+fma32: Any = intrinsic(_fma32)
+"""``fma32(a, b, c)`` in kernels: :func:`_fma32`."""
 
 
 def compiled_kernels() -> list[Any]:

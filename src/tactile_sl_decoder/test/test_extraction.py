@@ -6,6 +6,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from tactile_sl_decoder.contract import PATCH_SIZE
+from tactile_sl_decoder.extract import patches as patches_module
 from tactile_sl_decoder.extract.extraction import (
     Detections,
     ExtractionParams,
@@ -154,6 +155,23 @@ def test_sample_patches_centre_and_border():
                                                                          np.float32),
                           np.ones(2000, np.float32))  # more than one remap chunk
     assert (many == p[0]).all()
+
+
+def test_square_patch_kernel_gives_opencv_bytes():
+    """The kernel behind sample_patches is cv2.remap bit for bit (borders, ties, any scale)."""
+    assert patches_module._kernel_is_exact()      # else every call would go to cv2.remap
+    rng = np.random.default_rng(11)
+    for h, w in ((1, 1), (2, 3), (48, 64), (480, 640)):
+        gray = rng.integers(0, 256, (h, w), dtype=np.uint8)
+        n = 300
+        u = rng.uniform(-12.0, w + 12.0, n).astype(np.float32)
+        v = rng.uniform(-12.0, h + 12.0, n).astype(np.float32)
+        v[:50] = np.round(v[:50] * 32.0) / 32.0       # exactly on OpenCV's 1/32 grid
+        u[50:100] = np.floor(u[50:100]) + 0.5        # half-way: rounding ties
+        step = rng.uniform(0.3, 3.0, n).astype(np.float32)
+        gray.flags.writeable = bool(h % 2)            # read-only images (from a bag) too
+        np.testing.assert_array_equal(sample_patches(gray, u, v, step),
+                                      patches_module.remap_patches(gray, u, v, step))
 
 
 def test_spacing_estimate_on_a_lattice():

@@ -12,13 +12,13 @@ from tactile_sl_decoder.decode.grid import (
     NEIGHBOUR_SLOTS,
     OFFSETS,
     GridParams,
-    _best_four,
-    _combine,
     _global_frame,
-    _smooth,
+    _local_spacings,
+    _per_glyph,
+    local_vectors_reference,
     nearest_neighbours,
 )
-from tactile_sl_decoder.decode.links import neighbour_table
+from tactile_sl_decoder.decode.links import lattice_vectors, neighbour_table
 
 _REVERSE = 8 - NEIGHBOUR_SLOTS
 _DIAG = np.array([0, 2, 6, 8])
@@ -149,8 +149,8 @@ def _mutual(nbr: np.ndarray) -> None:
 
 
 
-def _inputs(seed, shear, stretch, drop, strays, oblique=False):
-    """What build_grid hands _assign, for a deformed synthetic lattice."""
+def _lattice(seed, shear, stretch, drop, strays, oblique=False):
+    """Glyph centres (u, v) of a deformed synthetic lattice, with gaps and stray points."""
     rng = np.random.default_rng(seed)
     r, c = np.mgrid[0:27, 0:28]
     a = np.array([[stretch, shear], [0.0, 1.0]]) if not oblique else np.array(
@@ -158,22 +158,28 @@ def _inputs(seed, shear, stretch, drop, strays, oblique=False):
     pts = 18.0 * np.column_stack([c.ravel(), r.ravel()]) @ a.T + rng.normal(0, 1.2, (756, 2))
     pts = pts[rng.random(len(pts)) >= drop]
     pts = np.vstack([pts, rng.uniform(0, 480, (strays, 2))])
-    u, v = pts[:, 0], pts[:, 1]
-    p = GridParams()
-    dist, idx = nearest_neighbours(u, v, p.k_neighbours, 18.0)
+    return pts[:, 0], pts[:, 1]
+
+
+def _candidates(u, v, p, hint):
+    """build_grid's steps 1-2: k-NN, displacements, spacing and the global frame."""
+    dist, idx = nearest_neighbours(u, v, p.k_neighbours, hint)
     valid = np.isfinite(dist)
     idx = np.where(valid, idx, 0)
     du = u[idx] - u[:, None]
     dv = v[idx] - v[:, None]
     spacing = float(np.median(dist[:, 0][valid[:, 0]]))
     col_dir = _global_frame(du[:, :4], dv[:, :4], dist[:, :4], spacing)
-    row_dir = np.array([-col_dir[1], col_dir[0]])
-    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, spacing, p)
-    col_vec = _combine(du, dv, steps[0], steps[1], col_dir * spacing)
-    row_vec = _combine(du, dv, steps[2], steps[3], row_dir * spacing)
-    flat_idx = idx.reshape(-1)
-    nbr4 = np.column_stack([np.where(found, flat_idx[at], -1) for found, at in steps])
-    both = _smooth(np.concatenate([col_vec, row_vec], axis=1), nbr4)
+    return dist, idx, valid, du, dv, spacing, col_dir, np.array([-col_dir[1], col_dir[0]])
+
+
+def _inputs(seed, shear, stretch, drop, strays, oblique=False):
+    """What build_grid hands _assign, for a deformed synthetic lattice."""
+    u, v = _lattice(seed, shear, stretch, drop, strays, oblique)
+    p = GridParams()
+    dist, idx, valid, du, dv, spacing, col_dir, row_dir = _candidates(u, v, p, 18.0)
+    both, _nbr4 = local_vectors_reference(du, dv, dist, valid, idx, col_dir, row_dir, spacing,
+                                          spacing, spacing, p)
     return du, dv, idx, valid, both[:, :2], both[:, 2:], p
 
 
@@ -208,3 +214,31 @@ def test_fast_matching_equals_exhaustive_matching(seed, shear):
     fast = links.copy()
     fast[redo] = ref[redo]
     assert np.array_equal(fast, ref) and len(redo) < len(links) // 2
+
+
+@pytest.mark.parametrize("seed,shear,stretch,drop,strays,oblique,local_gates,smooth", [
+    (0, 0.0, 1.0, 0.0, 0, False, False, 1), (1, 0.15, 1.2, 0.1, 30, False, False, 2),
+    (2, -0.3, 0.8, 0.3, 80, False, True, 1), (3, 0.0, 1.0, 0.05, 10, True, True, 0),
+    (4, 0.1, 1.6, 0.2, 40, False, True, 3)])
+def test_lattice_vectors_kernel_equals_the_numpy_steps(seed, shear, stretch, drop, strays,
+                                                      oblique, local_gates, smooth):
+    """Step 3 of build_grid in numba == _best_four, _combine and _smooth, bit for bit."""
+    u, v = _lattice(seed, shear, stretch, drop, strays, oblique)
+    p = GridParams(local_gates=local_gates, smooth_iterations=smooth)
+    dist, idx, valid, du, dv, spacing, col_dir, row_dir = _candidates(
+        u, v, p, 0.0 if local_gates else 18.0)
+    short = long = spacing
+    if local_gates:
+        short, long = _local_spacings(dist, idx, valid)
+    fallback = spacing if not local_gates else np.sqrt(short * long)
+    want_vec, want_nbr4 = local_vectors_reference(du, dv, dist, valid, idx, col_dir, row_dir,
+                                                  short, long, fallback, p)
+    n = len(u)
+    got_vec, got_nbr4 = lattice_vectors(
+        du, dv, np.ascontiguousarray(dist), valid, idx.astype(np.int64), col_dir, row_dir,
+        _per_glyph(p.init_min_len * short, n), _per_glyph(p.init_max_len * long, n),
+        float(np.cos(np.radians(p.init_angle_deg))),
+        np.broadcast_to(col_dir * fallback, (n, 2)).copy(),
+        np.broadcast_to(row_dir * fallback, (n, 2)).copy(), smooth)
+    assert np.array_equal(got_nbr4, want_nbr4) and (got_nbr4 >= 0).mean() > 0.5
+    np.testing.assert_array_equal(got_vec, want_vec)

@@ -83,3 +83,41 @@ def test_degenerate_camera_info_is_rejected_with_a_clear_error():
     rig = StereoRig.from_msgs(Msg(msg_l), Msg(msg_r))
     assert rig.frame_id == "left_optical"
     assert rig.baseline_m == pytest.approx(np.linalg.norm([0.012, 0.0004, 0.0021]), rel=1e-6)
+
+
+def _triangulate_reference(rig, uv_left, uv_right):
+    """The numpy version intersect_rays replaced, verbatim (the kernel's reference)."""
+    rows, rhs = [], []
+    for P, uv in ((rig.left.P, uv_left), (rig.right.P, uv_right)):
+        for axis in (0, 1):
+            coord = uv[:, axis]
+            rows.append([coord * P[2, i] - P[axis, i] for i in range(3)])
+            rhs.append(P[axis, 3] - coord * P[2, 3])
+
+    def dot(i, j):
+        return rows[0][i] * rows[0][j] + rows[1][i] * rows[1][j] + \
+            rows[2][i] * rows[2][j] + rows[3][i] * rows[3][j]
+
+    a00, a01, a02, a11, a12, a22 = dot(0, 0), dot(0, 1), dot(0, 2), dot(1, 1), dot(1, 2), \
+        dot(2, 2)
+    r0, r1, r2 = (rows[0][i] * rhs[0] + rows[1][i] * rhs[1] + rows[2][i] * rhs[2]
+                  + rows[3][i] * rhs[3] for i in range(3))
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_det = 1.0 / (a00 * c00 + a01 * c01 + a02 * c02)
+        return np.column_stack([(c00 * r0 + c01 * r1 + c02 * r2) * inv_det,
+                                (c01 * r0 + c11 * r1 + c12 * r2) * inv_det,
+                                (c02 * r0 + c12 * r1 + c22 * r2) * inv_det])
+
+
+def test_ray_intersection_kernel_equals_the_numpy_version():
+    """intersect_rays gives the numpy normal-equation solution bit for bit (degenerate too)."""
+    left, right, _r, _t = _rig(0.0, True)
+    rig = StereoRig(left, right, "left_optical")
+    rng = np.random.default_rng(4)
+    uv_left = rng.uniform(0, 640, (2000, 2))
+    uv_right = uv_left + rng.normal([-40.0, 0.0], 2.0, (2000, 2))
+    uv_right[:5] = uv_left[:5]                       # zero disparity: far / degenerate rays
+    got, _err = rig.triangulate_rectified(uv_left, uv_right)
+    np.testing.assert_array_equal(got, _triangulate_reference(rig, uv_left, uv_right))

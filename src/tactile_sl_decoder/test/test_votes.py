@@ -63,3 +63,55 @@ def test_linked_regions_equal_scipys_connected_components(seed, p):
     _, want = connected_components(graph, directed=False)
     got = linked_regions(nbr, ok)
     assert got.dtype == want.dtype and np.array_equal(got, want)
+
+
+def _confirmed_reference(links, cell, label, values, delta, valid_ext, min_agree, size):
+    """The numpy version confirmed_cells replaced (CodewordDecoder.confirm), verbatim."""
+    has = cell >= 0
+    ok = has & (values[np.maximum(cell, 0)] == label)
+    cj = np.append(cell, -1)[links]
+    implied = cj - delta
+    implied = np.where(valid_ext[implied], implied, -1)
+    known = cj >= 0
+    agree = (known & (implied == cell[:, None])).sum(axis=1)
+    disagree = (known & (implied != cell[:, None])).sum(axis=1)
+    ok &= (agree >= min_agree) & (disagree == 0)
+    claims = np.bincount(cell[has], minlength=size)
+    ok &= ~(has & (claims[np.maximum(cell, 0)] > 1))
+    return ok
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_confirmed_cells_kernel_equals_the_numpy_version(seed):
+    """Carried cells confirmed as the numpy version did: lattices with wrong, duplicated,
+    missing candidates and labels, two images (groups)."""
+    from tactile_sl_decoder.decode.codewords import _Layout, _links
+    from tactile_sl_decoder.decode.grid import build_grid
+    from tactile_sl_decoder.decode.votes import confirmed_cells
+
+    rng = np.random.default_rng(seed)
+    lay = _Layout(30, 32, 2)
+    values = rng.integers(0, 3, lay.size).astype(np.int64)
+    values[~lay.valid] = -1
+    rr, cc = np.mgrid[0:20, 0:22]
+    u = 20.0 + 18.0 * cc.ravel() + rng.normal(0, 0.8, cc.size)
+    v = 20.0 + 18.0 * rr.ravel() + rng.normal(0, 0.8, rr.size)
+    keep = rng.random(len(u)) > 0.05
+    grid = build_grid(u[keep], v[keep])
+    n = len(grid.nbr)
+    group = (np.arange(n) >= n // 2).astype(np.int64)
+    cell = lay.encode(group, rr.ravel()[keep] + 3, cc.ravel()[keep] + 4)
+    label = values[cell].copy()
+    flip = rng.random(n) < 0.05
+    label[flip] = (label[flip] + 1) % 3                  # misread
+    label[rng.random(n) < 0.03] = -2                     # not confident
+    cell[rng.random(n) < 0.05] = -1                      # nothing carried
+    wrong = rng.random(n) < 0.03
+    cell[wrong] = lay.encode(group[wrong], rng.integers(0, 30, wrong.sum()),
+                             rng.integers(0, 32, wrong.sum()))
+    cell[5] = cell[40] if cell[40] >= 0 else cell[5]     # one cell claimed twice
+    links = np.ascontiguousarray(_links(grid.nbr), dtype=np.int64)
+    args = (links, cell, label, values, lay.delta.astype(np.int64), lay.valid_ext, 2, lay.size)
+    want = _confirmed_reference(*args)
+    got = confirmed_cells(*args)
+    assert np.array_equal(got, want) and 0.3 < want.mean() < 0.95

@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import CELL_UNKNOWN, LABEL_UNKNOWN
 from tactile_sl_decoder.decode.grid import NEIGHBOUR_SLOTS, OFFSETS, Grid, window_indices
-from tactile_sl_decoder.decode.votes import group_votes, linked_regions
+from tactile_sl_decoder.decode.votes import confirmed_cells, group_votes, linked_regions
 
 DIRECT_TABLE_MAX = 1 << 22   # code spaces up to this size are looked up by direct address
 
@@ -405,15 +405,11 @@ class CodewordDecoder:
             nbr = nbr.reshape(n, 3, 3)[:, :, ::-1].reshape(n, 9)
         lab = np.where(np.asarray(confidence) >= p.min_confidence,
                        np.asarray(labels).astype(np.int64), -2)
-        ok = has & (values[np.maximum(internal, 0)] == lab)
-        cj, implied = self._expected(nbr, internal, lay)
-        known = cj >= 0
-        agree = (known & (implied == internal[:, None])).sum(axis=1)
-        disagree = (known & (implied != internal[:, None])).sum(axis=1)
-        ok &= (agree >= min_agree) & (disagree == 0)
-        claims = np.bincount(internal[has], minlength=lay.size)
-        ok &= ~(has & (claims[np.maximum(internal, 0)] > 1))
-        return ok
+        return confirmed_cells(np.ascontiguousarray(_links(nbr), dtype=np.int64),
+                               np.ascontiguousarray(internal, dtype=np.int64), lab,
+                               np.ascontiguousarray(values, dtype=np.int64),
+                               np.ascontiguousarray(lay.delta, dtype=np.int64),
+                               lay.valid_ext, int(min_agree), int(lay.size))
 
     @staticmethod
     def _expected(nbr: np.ndarray, cell: np.ndarray, lay: _Layout,

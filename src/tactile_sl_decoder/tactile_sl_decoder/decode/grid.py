@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.decode.links import neighbour_table
+from tactile_sl_decoder.decode.links import lattice_vectors, neighbour_table
 from tactile_sl_decoder.neighbours import knn_within
 
 # Offsets of the 3x3 neighbourhood, row-major: index 3 * (dr + 1) + (dc + 1).
@@ -238,19 +238,44 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     if p.local_gates:
         short, long = _local_spacings(dist, idx, valid)
 
-    # Local lattice vectors, following stretching: the best-aligned neighbour each way.
-    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, short, p, long)
+    # Local lattice vectors, following stretching: the best-aligned neighbour each way,
+    # smoothed over the 4-neighbourhood (a median: one wrong link does not matter).  One
+    # kernel (links.lattice_vectors) with the arithmetic of _best_four, _combine, _smooth.
     fallback = spacing if not p.local_gates else np.sqrt(short * long)
+    both, _nbr4 = lattice_vectors(
+        np.ascontiguousarray(du), np.ascontiguousarray(dv), np.ascontiguousarray(dist),
+        np.ascontiguousarray(valid), np.ascontiguousarray(idx, dtype=np.int64),
+        np.ascontiguousarray(col_dir, np.float64), np.ascontiguousarray(row_dir, np.float64),
+        _per_glyph(p.init_min_len * short, n), _per_glyph(p.init_max_len * long, n),
+        float(np.cos(np.radians(p.init_angle_deg))),
+        np.broadcast_to(col_dir * fallback, (n, 2)).astype(np.float64, order="C"),
+        np.broadcast_to(row_dir * fallback, (n, 2)).astype(np.float64, order="C"),
+        int(p.smooth_iterations))
+    col_vec, row_vec = both[:, :2], both[:, 2:]
+    nbr = _assign(du, dv, idx, valid, col_vec, row_vec, p)
+    return Grid(nbr, col_vec, row_vec, spacing, pts)
+
+
+def _per_glyph(gate: float | np.ndarray, n: int) -> np.ndarray:
+    """A length gate (one value, or (N, 1) per glyph) as an (N,) float64 array."""
+    return np.array(np.broadcast_to(np.asarray(gate, np.float64).reshape(-1), (n,)))
+
+
+def local_vectors_reference(du: np.ndarray, dv: np.ndarray, dist: np.ndarray,
+                            valid: np.ndarray, idx: np.ndarray, col_dir: np.ndarray,
+                            row_dir: np.ndarray, spacing: float | np.ndarray,
+                            long: float | np.ndarray, fallback: float | np.ndarray,
+                            p: GridParams) -> tuple[np.ndarray, np.ndarray]:
+    """Step 3 in numpy, (N, 4) vectors and (N, 4) 4-neighbours: the kernel's reference."""
+    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, spacing, p, long)
     col_vec = _combine(du, dv, steps[0], steps[1], col_dir * fallback)
     row_vec = _combine(du, dv, steps[2], steps[3], row_dir * fallback)
     flat_idx = idx.reshape(-1)
     nbr4 = np.column_stack([np.where(found, flat_idx[at], -1) for found, at in steps])
-    # Smooth them over the 4-neighbourhood (a median: one wrong link does not matter).
+    both = np.concatenate([col_vec, row_vec], axis=1)
     for _ in range(p.smooth_iterations):
-        both = _smooth(np.concatenate([col_vec, row_vec], axis=1), nbr4)
-        col_vec, row_vec = both[:, :2], both[:, 2:]
-    nbr = _assign(du, dv, idx, valid, col_vec, row_vec, p)
-    return Grid(nbr, col_vec, row_vec, spacing, pts)
+        both = _smooth(both, nbr4)
+    return both, nbr4
 
 
 NEIGHBOUR_SLOTS = np.array([o for o in range(9) if o != CENTRE])  # nbr columns of the 8 neighbours

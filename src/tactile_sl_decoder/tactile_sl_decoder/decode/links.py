@@ -19,6 +19,9 @@ _SLOT_DC = np.array([-1.0, 0.0, 1.0, -1.0, 1.0, -1.0, 0.0, 1.0])   # column step
 _SLOT_DR = np.array([-1.0, -1.0, -1.0, 0.0, 0.0, 1.0, 1.0, 1.0])   # row step of a slot
 _DIAGONALS = np.array([[0, 1, 3], [2, 1, 5], [6, 7, 3], [8, 7, 5]], np.int64)
 """(diagonal column, the column of its (dr, 0) neighbour, the column of its (0, dc) one)."""
+_SORT5_A = np.array([0, 3, 2, 2, 0, 0, 1, 1, 1], np.int64)
+_SORT5_B = np.array([1, 4, 4, 3, 3, 2, 4, 3, 2], np.int64)
+"""An optimal sorting network for 5 values (9 compare-exchanges a, b), as grid.py's."""
 
 
 @helper
@@ -143,3 +146,94 @@ def neighbour_table(du: np.ndarray, dv: np.ndarray, idx: np.ndarray, valid: np.n
                 nbr[i, diag] = -1
     _mutual(nbr)
     return nbr
+
+
+@helper
+def _axis_steps(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.ndarray,
+                ax0: float, ax1: float, min_len: float, max_len: float, cos_angle: float
+                ) -> tuple[int, int]:
+    """One glyph's first candidates within the gates forward and backward along an axis."""
+    fwd = -1
+    bwd = -1
+    for k in range(du.shape[0]):
+        if not (valid[k] and dist[k] > min_len and dist[k] < max_len):
+            continue
+        dot = du[k] * ax0 + dv[k] * ax1
+        td = cos_angle * dist[k]
+        if fwd < 0 and dot > td:
+            fwd = k
+        if bwd < 0 and dot < -td:
+            bwd = k
+    return fwd, bwd
+
+
+@helper
+def _median_of_four_neighbours(old: np.ndarray, nbr4: np.ndarray) -> np.ndarray:
+    """Each glyph's vectors: the median over it and its found 4-neighbours (grid._smooth)."""
+    n, dims = old.shape
+    vec = np.empty_like(old)
+    m = np.empty(5, np.float64)
+    for i in range(n):
+        cnt = 1
+        for q in range(4):
+            if nbr4[i, q] >= 0:
+                cnt += 1
+        for d in range(dims):
+            m[0] = old[i, d]
+            for q in range(4):
+                j = nbr4[i, q]
+                m[q + 1] = old[j, d] if j >= 0 else np.inf
+            for s in range(9):
+                a = _SORT5_A[s]
+                b = _SORT5_B[s]
+                lo = np.minimum(m[a], m[b])
+                m[b] = np.maximum(m[a], m[b])
+                m[a] = lo
+            low = m[2] if cnt >= 5 else (m[1] if cnt >= 3 else m[0])
+            high = m[2] if cnt >= 4 else (m[1] if cnt >= 2 else m[0])
+            vec[i, d] = 0.5 * (low + high)
+    return vec
+
+
+@kernel("Tuple((float64[:, ::1], int64[:, ::1]))(float64[:, ::1], float64[:, ::1], "
+        "float64[:, ::1], boolean[:, ::1], int64[:, ::1], float64[::1], float64[::1], "
+        "float64[::1], float64[::1], float64, float64[:, ::1], float64[:, ::1], int64)")
+def lattice_vectors(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.ndarray,
+                    idx: np.ndarray, col_dir: np.ndarray, row_dir: np.ndarray,
+                    min_len: np.ndarray, max_len: np.ndarray, cos_angle: float,
+                    col_fallback: np.ndarray, row_fallback: np.ndarray,
+                    smooth_iterations: int) -> tuple[np.ndarray, np.ndarray]:
+    """Local lattice vectors (N, 4: column u, v, row u, v) and 4-neighbours (N, 4), step 3.
+
+    Per glyph, the first (shortest) candidate within the gates along +col, -col, +row, -row
+    (angle: dot product beyond ``cos_angle`` x its length; length between ``min_len`` and
+    ``max_len``, per glyph); the mean of the forward step and the negated backward step,
+    whichever exist, else the fallback vector; then ``smooth_iterations`` medians over each
+    glyph and its found 4-neighbours (a 5-value sorting network).  The operations of
+    grid.py's ``_best_four``, ``_combine`` and ``_smooth``, in their order, element by
+    element: the same bits (tests), in one pass without the GIL.
+    """
+    n = du.shape[0]
+    vec = np.empty((n, 4), np.float64)
+    nbr4 = np.full((n, 4), -1, np.int64)
+    for i in range(n):
+        for a in range(2):
+            ax = col_dir if a == 0 else row_dir
+            fwd, bwd = _axis_steps(du[i], dv[i], dist[i], valid[i], ax[0], ax[1], min_len[i],
+                                   max_len[i], cos_angle)
+            count = 0.0
+            tu = tv = bu = bv = 0.0
+            if fwd >= 0:
+                count += 1.0
+                tu, tv = du[i, fwd], dv[i, fwd]
+                nbr4[i, 2 * a] = idx[i, fwd]
+            if bwd >= 0:
+                count += 1.0
+                bu, bv = -du[i, bwd], -dv[i, bwd]
+                nbr4[i, 2 * a + 1] = idx[i, bwd]
+            fallback = col_fallback if a == 0 else row_fallback
+            vec[i, 2 * a] = (tu + bu) / count if count > 0 else fallback[i, 0]
+            vec[i, 2 * a + 1] = (tv + bv) / count if count > 0 else fallback[i, 1]
+    for _ in range(smooth_iterations):
+        vec = _median_of_four_neighbours(vec, nbr4)
+    return vec, nbr4

@@ -120,3 +120,45 @@ def linked_regions(neighbours: np.ndarray, linked: np.ndarray) -> np.ndarray:
             count += 1
         comp[i] = label[r]
     return comp
+
+
+@kernel("boolean[::1](int64[:, ::1], int64[::1], int64[::1], int64[::1], int64[::1], "
+        "boolean[::1], int64, int64)")
+def confirmed_cells(links: np.ndarray, cell: np.ndarray, label: np.ndarray,
+                    values: np.ndarray, delta: np.ndarray, valid_ext: np.ndarray,
+                    min_agree: int, size: int) -> np.ndarray:
+    """Which glyphs' candidate cells this frame confirms (``CodewordDecoder.confirm``).
+
+    ``links`` (N, 8): each glyph's lattice neighbours (N = none); ``cell`` (N,): candidate
+    internal cells (-1 none); ``label``: the glyphs' labels (-2 = not confident enough);
+    ``values``: the pattern value of every internal cell; ``delta`` (8,): the neighbours'
+    internal cell offsets; ``valid_ext``: cells inside the pattern.  Confirmed: the label is
+    the pattern's value there, at least ``min_agree`` neighbours with a candidate imply
+    this cell and none implies another, and no other glyph claims the same cell.
+    """
+    n = cell.shape[0]
+    claims = np.zeros(size, np.int64)
+    for i in range(n):
+        if cell[i] >= 0:
+            claims[cell[i]] += 1
+    ok = np.zeros(n, np.bool_)
+    for i in range(n):
+        here = cell[i]
+        if here < 0 or values[here] != label[i] or claims[here] > 1:
+            continue
+        agree = 0
+        disagree = 0
+        for s in range(8):
+            j = links[i, s]
+            there = cell[j] if j < n else -1
+            if there < 0:
+                continue
+            implied = there - delta[s]
+            if not valid_ext[implied]:
+                implied = -1
+            if implied == here:
+                agree += 1
+            else:
+                disagree += 1
+        ok[i] = agree >= min_agree and disagree == 0
+    return ok

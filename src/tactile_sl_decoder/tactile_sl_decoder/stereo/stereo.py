@@ -21,6 +21,7 @@ import numpy as np
 
 from tactile_sl_common.camera_info import CameraCalibration, CameraInfoError, calibration_from_msg
 from tactile_sl_common.settings import SettingsTable
+from tactile_sl_decoder.jit import kernel
 
 UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-12)
 
@@ -102,33 +103,12 @@ class StereoRig:
 
         Returns points (N, 3) and the larger of the two rectified reprojection errors (px).
         """
-        uv_left = np.asarray(uv_left, np.float64)
-        uv_right = np.asarray(uv_right, np.float64)
+        uv_left = np.ascontiguousarray(uv_left, np.float64).reshape(-1, 2)
+        uv_right = np.ascontiguousarray(uv_right, np.float64).reshape(-1, 2)
         if len(uv_left) == 0:
             return np.zeros((0, 3)), np.zeros(0)
-        rows: list[list[np.ndarray]] = []     # rows[k][i]: coefficient i of equation k, (N,)
-        rhs: list[np.ndarray] = []
-        for P, uv in ((self.left.P, uv_left), (self.right.P, uv_right)):
-            for axis in (0, 1):
-                coord = uv[:, axis]
-                rows.append([coord * P[2, i] - P[axis, i] for i in range(3)])
-                rhs.append(P[axis, 3] - coord * P[2, 3])
-
-        def dot(i: int, j: int) -> np.ndarray:
-            return rows[0][i] * rows[0][j] + rows[1][i] * rows[1][j] + \
-                rows[2][i] * rows[2][j] + rows[3][i] * rows[3][j]
-
-        a00, a01, a02, a11, a12, a22 = dot(0, 0), dot(0, 1), dot(0, 2), dot(1, 1), dot(1, 2), \
-            dot(2, 2)
-        r0, r1, r2 = (rows[0][i] * rhs[0] + rows[1][i] * rhs[1] + rows[2][i] * rhs[2]
-                      + rows[3][i] * rhs[3] for i in range(3))
-        c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
-        c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv_det = 1.0 / (a00 * c00 + a01 * c01 + a02 * c02)
-            x = np.column_stack([(c00 * r0 + c01 * r1 + c02 * r2) * inv_det,
-                                 (c01 * r0 + c11 * r1 + c12 * r2) * inv_det,
-                                 (c02 * r0 + c12 * r1 + c22 * r2) * inv_det])
+        x = intersect_rays(uv_left, uv_right, np.ascontiguousarray(self.left.P, np.float64),
+                           np.ascontiguousarray(self.right.P, np.float64))
         err = np.maximum(_reproj(self.left.P, x, uv_left), _reproj(self.right.P, x, uv_right))
         return x, err
 
@@ -142,6 +122,46 @@ class StereoRig:
         return x_rect @ self.left.R, err
 
 
+@kernel("float64[:, ::1](float64[:, ::1], float64[:, ::1], float64[:, ::1], float64[:, ::1])")
+def intersect_rays(uv_left: np.ndarray, uv_right: np.ndarray, p_left: np.ndarray,
+                   p_right: np.ndarray) -> np.ndarray:
+    """Points (N, 3) of :meth:`StereoRig.triangulate_rectified`, one pass without the GIL.
+
+    Per pair, the four equations' coefficients (u P3 - P1, v P3 - P2 of each camera) and
+    right-hand sides, the normal equations and their closed-form inverse, evaluated in the
+    order of the numpy version this replaced (kept in the tests): the same bits.  A
+    degenerate pair gives inf / nan, not an error.
+    """
+    n = uv_left.shape[0]
+    out = np.empty((n, 3), np.float64)
+    rows = np.empty((4, 3), np.float64)
+    rhs = np.empty(4, np.float64)
+    a = np.empty((3, 3), np.float64)
+    r = np.empty(3, np.float64)
+    for k in range(n):
+        for e in range(4):
+            p = p_left if e < 2 else p_right
+            axis = e % 2
+            coord = uv_left[k, axis] if e < 2 else uv_right[k, axis]
+            for i in range(3):
+                rows[e, i] = coord * p[2, i] - p[axis, i]
+            rhs[e] = p[axis, 3] - coord * p[2, 3]
+        for i in range(3):
+            for j in range(i, 3):
+                a[i, j] = rows[0, i] * rows[0, j] + rows[1, i] * rows[1, j] + \
+                    rows[2, i] * rows[2, j] + rows[3, i] * rows[3, j]
+            r[i] = rows[0, i] * rhs[0] + rows[1, i] * rhs[1] + rows[2, i] * rhs[2] + \
+                rows[3, i] * rhs[3]
+        a00, a01, a02, a11, a12, a22 = a[0, 0], a[0, 1], a[0, 2], a[1, 1], a[1, 2], a[2, 2]
+        c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+        c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+        inv_det = 1.0 / (a00 * c00 + a01 * c01 + a02 * c02)
+        out[k, 0] = (c00 * r[0] + c01 * r[1] + c02 * r[2]) * inv_det
+        out[k, 1] = (c01 * r[0] + c11 * r[1] + c12 * r[2]) * inv_det
+        out[k, 2] = (c02 * r[0] + c12 * r[1] + c22 * r[2]) * inv_det
+    return out
+
+
 def _centre(P: np.ndarray) -> np.ndarray | None:
     """Optical centre of a 3x4 projection (its right null vector), None if degenerate."""
     M = P[:, :3]
@@ -151,8 +171,8 @@ def _centre(P: np.ndarray) -> np.ndarray | None:
 
 
 def _reproj(P: np.ndarray, x: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    proj = x @ P[:, :3].T + P[:, 3]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):   # degenerate pairs
+        proj = x @ P[:, :3].T + P[:, 3]
         pix = proj[:, :2] / proj[:, 2:3]
         err = np.linalg.norm(pix - uv, axis=1)
     return np.where(np.isfinite(err) & (proj[:, 2] > 0), err, np.inf)
