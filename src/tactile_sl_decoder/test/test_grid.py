@@ -106,12 +106,12 @@ def test_precomputed_neighbours_give_the_same_grid():
 
 
 def test_smoothing_is_the_median_of_the_found_members():
-    from tactile_sl_decoder.decode.grid import _smooth
+    from tactile_sl_decoder.decode.links import _median_of_four_neighbours
 
     rng = np.random.default_rng(0)
     vec = rng.normal(size=(200, 4))
     nbr4 = np.where(rng.random((200, 4)) < 0.3, -1, rng.integers(0, 200, (200, 4)))
-    got = _smooth(vec, nbr4)
+    got = _median_of_four_neighbours(vec, nbr4)
     for i in range(200):
         members = np.vstack([vec[i], vec[nbr4[i][nbr4[i] >= 0]]])
         assert np.allclose(got[i], np.median(members, axis=0), rtol=0, atol=1e-15)

@@ -1,8 +1,9 @@
-"""The neighbour table in numba (decode/links.py) equals the numpy version it replaced.
+"""The lattice kernels in numba (decode/links.py) equal the numpy versions they replaced.
 
-The numpy version is kept here, verbatim, as the reference: on jittered, stretched,
-sheared lattices with missing glyphs and stray detections (and, in the digest test, on
-every bundled bag) both give the same table.
+The numpy versions (the local lattice vectors of step 3, the neighbour table of steps 4-5)
+are kept here, verbatim, as the references: on jittered, stretched, sheared lattices with
+missing glyphs and stray detections (and, in the digest test, on every bundled bag) both
+give the same vectors and table.
 """
 import numpy as np
 import pytest
@@ -15,10 +16,93 @@ from tactile_sl_decoder.decode.grid import (
     _global_frame,
     _local_spacings,
     _per_glyph,
-    local_vectors_reference,
     nearest_neighbours,
 )
 from tactile_sl_decoder.decode.links import lattice_vectors, neighbour_table
+
+# ---- the numpy version of build_grid's step 3 (links.lattice_vectors' reference), verbatim
+
+
+def _best_four(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.ndarray,
+               col_dir: np.ndarray, row_dir: np.ndarray, spacing: float | np.ndarray,
+               p: GridParams, long_spacing: float | np.ndarray | None = None
+               ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per glyph, the shortest neighbour step within angle/length gates of +-col, +-row.
+
+    The gates are ``init_min_len`` x ``spacing`` and ``init_max_len`` x ``long_spacing``
+    (default ``spacing``): the image's spacing (a float) or each glyph's short and long
+    lattice steps ((N, 1) arrays).
+
+    Four (found (N,) bool, flat index into the (N, K) candidate arrays) pairs, for +col,
+    -col, +row, -row.  Candidates come sorted by distance, so the shortest one within the
+    gates is the first one.
+    """
+    n, kk = dist.shape
+    long = spacing if long_spacing is None else long_spacing
+    gate = valid & (dist > p.init_min_len * spacing) & (dist < p.init_max_len * long)
+    td = np.cos(np.radians(p.init_angle_deg)) * dist      # cos(angle) > t  <=>  dot > t |d|
+    base = np.arange(n) * kk
+    out = []
+    for axis in (col_dir, row_dir):
+        dot = du * axis[0] + dv * axis[1]
+        for ok in (dot > td, dot < -td):
+            ok &= gate
+            at = base + ok.argmax(axis=1)
+            out.append((ok.reshape(-1)[at], at))
+    return out
+
+
+def _combine(du: np.ndarray, dv: np.ndarray, forward: tuple[np.ndarray, np.ndarray],
+             backward: tuple[np.ndarray, np.ndarray], fallback: np.ndarray) -> np.ndarray:
+    """Mean of the forward step and the negated backward step, whichever exist (N, 2)."""
+    (fwd, fat), (bwd, bat) = forward, backward
+    flat_u, flat_v = du.reshape(-1), dv.reshape(-1)
+    f = fwd[:, None]
+    b = bwd[:, None]
+    fstep = np.column_stack([flat_u[fat], flat_v[fat]])
+    bstep = np.column_stack([flat_u[bat], flat_v[bat]])
+    total = np.where(f, fstep, 0.0) + np.where(b, -bstep, 0.0)
+    count = f.astype(np.float64) + b
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = total / count
+    return np.where(count > 0, out, fallback)
+
+
+_SORT5 = ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2))
+"""An optimal sorting network for 5 values (9 compare-exchanges)."""
+
+
+def _smooth(vec: np.ndarray, nbr4: np.ndarray) -> np.ndarray:
+    """Median of per-glyph vectors (N, D) and their found 4-neighbours' (robust to one bad one)."""
+    n, dim = vec.shape
+    ext = np.vstack([vec, np.full((1, dim), np.inf)])  # a missing neighbour (-1) reads +inf
+    m = [vec] + [ext[nbr4[:, k]] for k in range(4)]    # 5 x (N, D), sorted below
+    for a, b in _SORT5:
+        lo = np.minimum(m[a], m[b])
+        m[b] = np.maximum(m[a], m[b])
+        m[a] = lo
+    cnt = (1 + (nbr4 >= 0).sum(axis=1))[:, None]       # members: the glyph itself and found ones
+    lo = np.where(cnt >= 5, m[2], np.where(cnt >= 3, m[1], m[0]))   # index (cnt - 1) // 2
+    hi = np.where(cnt >= 4, m[2], np.where(cnt >= 2, m[1], m[0]))   # index cnt // 2
+    return 0.5 * (lo + hi)
+
+
+def local_vectors_reference(du: np.ndarray, dv: np.ndarray, dist: np.ndarray,
+                            valid: np.ndarray, idx: np.ndarray, col_dir: np.ndarray,
+                            row_dir: np.ndarray, spacing: float | np.ndarray,
+                            long: float | np.ndarray, fallback: float | np.ndarray,
+                            p: GridParams) -> tuple[np.ndarray, np.ndarray]:
+    """Step 3 in numpy, (N, 4) vectors and (N, 4) 4-neighbours: the kernel's reference."""
+    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, spacing, p, long)
+    col_vec = _combine(du, dv, steps[0], steps[1], col_dir * fallback)
+    row_vec = _combine(du, dv, steps[2], steps[3], row_dir * fallback)
+    flat_idx = idx.reshape(-1)
+    nbr4 = np.column_stack([np.where(found, flat_idx[at], -1) for found, at in steps])
+    both = np.concatenate([col_vec, row_vec], axis=1)
+    for _ in range(p.smooth_iterations):
+        both = _smooth(both, nbr4)
+    return both, nbr4
+
 
 _REVERSE = 8 - NEIGHBOUR_SLOTS
 _DIAG = np.array([0, 2, 6, 8])

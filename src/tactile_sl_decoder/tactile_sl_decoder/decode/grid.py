@@ -116,70 +116,6 @@ def _local_spacings(dist: np.ndarray, idx: np.ndarray, valid: np.ndarray
     return out[0], np.maximum(out[1], out[0])
 
 
-def _best_four(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.ndarray,
-               col_dir: np.ndarray, row_dir: np.ndarray, spacing: float | np.ndarray,
-               p: GridParams, long_spacing: float | np.ndarray | None = None
-               ) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per glyph, the shortest neighbour step within angle/length gates of +-col, +-row.
-
-    The gates are ``init_min_len`` x ``spacing`` and ``init_max_len`` x ``long_spacing``
-    (default ``spacing``): the image's spacing (a float) or each glyph's short and long
-    lattice steps ((N, 1) arrays).
-
-    Four (found (N,) bool, flat index into the (N, K) candidate arrays) pairs, for +col,
-    -col, +row, -row.  Candidates come sorted by distance, so the shortest one within the
-    gates is the first one.
-    """
-    n, kk = dist.shape
-    long = spacing if long_spacing is None else long_spacing
-    gate = valid & (dist > p.init_min_len * spacing) & (dist < p.init_max_len * long)
-    td = np.cos(np.radians(p.init_angle_deg)) * dist      # cos(angle) > t  <=>  dot > t |d|
-    base = np.arange(n) * kk
-    out = []
-    for axis in (col_dir, row_dir):
-        dot = du * axis[0] + dv * axis[1]
-        for ok in (dot > td, dot < -td):
-            ok &= gate
-            at = base + ok.argmax(axis=1)
-            out.append((ok.reshape(-1)[at], at))
-    return out
-
-
-def _combine(du: np.ndarray, dv: np.ndarray, forward: tuple[np.ndarray, np.ndarray],
-             backward: tuple[np.ndarray, np.ndarray], fallback: np.ndarray) -> np.ndarray:
-    """Mean of the forward step and the negated backward step, whichever exist (N, 2)."""
-    (fwd, fat), (bwd, bat) = forward, backward
-    flat_u, flat_v = du.reshape(-1), dv.reshape(-1)
-    f = fwd[:, None]
-    b = bwd[:, None]
-    fstep = np.column_stack([flat_u[fat], flat_v[fat]])
-    bstep = np.column_stack([flat_u[bat], flat_v[bat]])
-    total = np.where(f, fstep, 0.0) + np.where(b, -bstep, 0.0)
-    count = f.astype(np.float64) + b
-    with np.errstate(invalid="ignore", divide="ignore"):
-        out = total / count
-    return np.where(count > 0, out, fallback)
-
-
-_SORT5 = ((0, 1), (3, 4), (2, 4), (2, 3), (0, 3), (0, 2), (1, 4), (1, 3), (1, 2))
-"""An optimal sorting network for 5 values (9 compare-exchanges)."""
-
-
-def _smooth(vec: np.ndarray, nbr4: np.ndarray) -> np.ndarray:
-    """Median of per-glyph vectors (N, D) and their found 4-neighbours' (robust to one bad one)."""
-    n, dim = vec.shape
-    ext = np.vstack([vec, np.full((1, dim), np.inf)])  # a missing neighbour (-1) reads +inf
-    m = [vec] + [ext[nbr4[:, k]] for k in range(4)]    # 5 x (N, D), sorted below
-    for a, b in _SORT5:
-        lo = np.minimum(m[a], m[b])
-        m[b] = np.maximum(m[a], m[b])
-        m[a] = lo
-    cnt = (1 + (nbr4 >= 0).sum(axis=1))[:, None]       # members: the glyph itself and found ones
-    lo = np.where(cnt >= 5, m[2], np.where(cnt >= 3, m[1], m[0]))   # index (cnt - 1) // 2
-    hi = np.where(cnt >= 4, m[2], np.where(cnt >= 2, m[1], m[0]))   # index cnt // 2
-    return 0.5 * (lo + hi)
-
-
 def nearest_neighbours(u: np.ndarray, v: np.ndarray, k: int, spacing_hint: float = 0.0
                        ) -> tuple[np.ndarray, np.ndarray]:
     """The ``k - 1`` nearest other glyphs of every glyph: distances (N, k-1), indices.
@@ -239,8 +175,8 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
         short, long = _local_spacings(dist, idx, valid)
 
     # Local lattice vectors, following stretching: the best-aligned neighbour each way,
-    # smoothed over the 4-neighbourhood (a median: one wrong link does not matter).  One
-    # kernel (links.lattice_vectors) with the arithmetic of _best_four, _combine, _smooth.
+    # smoothed over the 4-neighbourhood (a median: one wrong link does not matter); one
+    # compiled pass (links.lattice_vectors).
     fallback = spacing if not p.local_gates else np.sqrt(short * long)
     both, _nbr4 = lattice_vectors(
         np.ascontiguousarray(du), np.ascontiguousarray(dv), np.ascontiguousarray(dist),
@@ -259,23 +195,6 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
 def _per_glyph(gate: float | np.ndarray, n: int) -> np.ndarray:
     """A length gate (one value, or (N, 1) per glyph) as an (N,) float64 array."""
     return np.array(np.broadcast_to(np.asarray(gate, np.float64).reshape(-1), (n,)))
-
-
-def local_vectors_reference(du: np.ndarray, dv: np.ndarray, dist: np.ndarray,
-                            valid: np.ndarray, idx: np.ndarray, col_dir: np.ndarray,
-                            row_dir: np.ndarray, spacing: float | np.ndarray,
-                            long: float | np.ndarray, fallback: float | np.ndarray,
-                            p: GridParams) -> tuple[np.ndarray, np.ndarray]:
-    """Step 3 in numpy, (N, 4) vectors and (N, 4) 4-neighbours: the kernel's reference."""
-    steps = _best_four(du, dv, dist, valid, col_dir, row_dir, spacing, p, long)
-    col_vec = _combine(du, dv, steps[0], steps[1], col_dir * fallback)
-    row_vec = _combine(du, dv, steps[2], steps[3], row_dir * fallback)
-    flat_idx = idx.reshape(-1)
-    nbr4 = np.column_stack([np.where(found, flat_idx[at], -1) for found, at in steps])
-    both = np.concatenate([col_vec, row_vec], axis=1)
-    for _ in range(p.smooth_iterations):
-        both = _smooth(both, nbr4)
-    return both, nbr4
 
 
 NEIGHBOUR_SLOTS = np.array([o for o in range(9) if o != CENTRE])  # nbr columns of the 8 neighbours

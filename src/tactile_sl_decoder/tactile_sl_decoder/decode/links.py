@@ -21,7 +21,7 @@ _DIAGONALS = np.array([[0, 1, 3], [2, 1, 5], [6, 7, 3], [8, 7, 5]], np.int64)
 """(diagonal column, the column of its (dr, 0) neighbour, the column of its (0, dc) one)."""
 _SORT5_A = np.array([0, 3, 2, 2, 0, 0, 1, 1, 1], np.int64)
 _SORT5_B = np.array([1, 4, 4, 3, 3, 2, 4, 3, 2], np.int64)
-"""An optimal sorting network for 5 values (9 compare-exchanges a, b), as grid.py's."""
+"""An optimal sorting network for 5 values (9 compare-exchanges a, b)."""
 
 
 @helper
@@ -169,7 +169,7 @@ def _axis_steps(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.ndar
 
 @helper
 def _median_of_four_neighbours(old: np.ndarray, nbr4: np.ndarray) -> np.ndarray:
-    """Each glyph's vectors: the median over it and its found 4-neighbours (grid._smooth)."""
+    """Each glyph's vectors: the median over it and its found 4-neighbours (missing: +inf)."""
     n, dims = old.shape
     vec = np.empty_like(old)
     m = np.empty(5, np.float64)
@@ -209,9 +209,9 @@ def lattice_vectors(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.
     (angle: dot product beyond ``cos_angle`` x its length; length between ``min_len`` and
     ``max_len``, per glyph); the mean of the forward step and the negated backward step,
     whichever exist, else the fallback vector; then ``smooth_iterations`` medians over each
-    glyph and its found 4-neighbours (a 5-value sorting network).  The operations of
-    grid.py's ``_best_four``, ``_combine`` and ``_smooth``, in their order, element by
-    element: the same bits (tests), in one pass without the GIL.
+    glyph and its found 4-neighbours (a 5-value sorting network).  The operations of the
+    numpy version it replaced (kept in test_links.py), in their order, element by element:
+    the same bits, in one pass without the GIL.
     """
     n = du.shape[0]
     vec = np.empty((n, 4), np.float64)
