@@ -16,7 +16,10 @@ pipe carries only short messages.  Settings travel with every frame, so a live c
 applies to the next frame as in the process; the camera calibration is sent when it changes.
 Workers are started with ``spawn`` (a fork of a process with DDS threads is unsafe), take
 about a second to start, end when the pipe closes, and their errors come back as the
-frame's errors.
+frame's errors.  Before it reports ready, each worker runs two synthetic frames through its
+code (a lattice of ink discs: extraction, patches, classification, the label carry), so that
+the first real frame finds every first-call cost paid; :meth:`CameraProcesses.wait_ready`
+waits for that (a live node, before it subscribes: no frame waits for a starting worker).
 """
 from __future__ import annotations
 
@@ -30,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from tactile_sl_common.camera_info import CameraCalibration
 from tactile_sl_common.heap import freeze_long_lived
 from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry, label_glyphs
 from tactile_sl_decoder.classify.classifier import Classifier
@@ -103,11 +107,17 @@ def _serve(conn: Connection, weights: str | None, threshold: float | None,
            cpu_threads: int) -> None:
     """The worker's loop: one camera's frames, in order, until the pipe closes."""
     set_cpu_threads(cpu_threads)
-    classifier = Classifier.load(weights, threshold)
+    try:
+        classifier = Classifier.load(weights, threshold)
+        _warm_up(classifier)
+    except Exception as exc:         # reported by the main process (wait_ready)
+        conn.send(("error", exc))
+        return
     carry = LabelCarry(CarryParams())
     camera: Any = None
     buffers = _Buffers()
     freeze_long_lived()        # no full collection of the imports between two frames
+    conn.send(("ready", None))
     frames = 0
     try:
         while True:
@@ -130,6 +140,24 @@ def _serve(conn: Connection, weights: str | None, threshold: float | None,
                     freeze_long_lived(collect=False)
     finally:
         buffers.close()
+
+
+def _warm_up(classifier: Classifier) -> None:
+    """Two synthetic frames through :func:`_half` (the second with carried labels).
+
+    A 17 px lattice of ink discs on a 640 x 480 image, a camera without distortion: every
+    step of a frame runs once (numba dispatch, OpenCV and BLAS first calls, the allocator's
+    pools), and nothing of it is kept.
+    """
+    rows, cols = np.mgrid[0:480, 0:640]
+    disc = (rows % 17 - 8.0) ** 2 + (cols % 17 - 8.0) ** 2 < 20.0
+    gray = np.where(disc, 60, 200).astype(np.uint8)
+    focal = np.array([[600.0, 0.0, 320.0], [0.0, 600.0, 240.0], [0.0, 0.0, 1.0]])
+    camera = CameraCalibration(640, 480, focal, np.zeros(5))
+    job = CameraJob(gray.shape, None, GridParams(), CarryParams(), None)
+    carry = LabelCarry(CarryParams())
+    for _ in range(2):
+        _half(gray, job, camera, classifier, carry)
 
 
 def _answer(job: CameraJob, image: SharedMemory, out: SharedMemory, camera: Any,
@@ -200,10 +228,34 @@ class CameraProcesses:
         self._cameras: list[Any] = [None, None]
         self._images: list[SharedMemory | None] = [None, None]
         self._results = [SharedMemory(create=True, size=RESULT_BYTES) for _ in range(2)]
+        self._ready = False
+
+    def wait_ready(self, timeout: float = 60.0) -> None:
+        """Wait until both workers have started and warmed up (RuntimeError if one failed).
+
+        :meth:`run` waits for it too; a live node calls it before it subscribes to images.
+        """
+        if self._ready:
+            return
+        deadline = time.monotonic() + timeout
+        for conn, proc in zip(self._conns, self._procs):
+            try:
+                if not conn.poll(max(0.0, deadline - time.monotonic())):
+                    raise RuntimeError(f"the {proc.name} worker process did not start within "
+                                       f"{timeout:.0f} s")
+                status, value = conn.recv()
+            except (EOFError, OSError):
+                raise RuntimeError(f"the {proc.name} worker process ended while starting "
+                                   f"(exit code {proc.exitcode})") from None
+            if status == "error":
+                raise RuntimeError(f"the {proc.name} worker process failed to start: "
+                                   f"{value}") from value
+        self._ready = True
 
     def run(self, images: tuple[np.ndarray, np.ndarray], cameras: tuple[Any, Any],
             jobs: tuple[CameraJob, CameraJob]) -> tuple[CameraResult, CameraResult]:
         """Both cameras' halves of one frame, computed side by side."""
+        self.wait_ready()
         for i, conn in enumerate(self._conns):
             if cameras[i] is not self._cameras[i]:
                 conn.send(("camera", cameras[i]))

@@ -50,3 +50,29 @@ def test_the_same_points_cells_and_carry_as_in_process():
     finally:
         here.close()
         there.close()
+
+
+def test_a_worker_that_cannot_start_is_reported_with_why(tmp_path):
+    """wait_ready (a node calls it before subscribing) names the worker and the reason."""
+    from tactile_sl_decoder.camera_processes import CameraProcesses
+
+    procs = CameraProcesses(str(tmp_path / "missing.pt"), None)
+    try:
+        with pytest.raises(RuntimeError, match=r"left camera worker process failed to start.*"
+                                               r"missing\.pt"):
+            procs.wait_ready(timeout=60.0)
+    finally:
+        procs.close()
+
+
+def test_workers_report_ready_after_their_warm_up():
+    """Both workers answer ready (two synthetic frames run); frames then go through."""
+    from tactile_sl_decoder.camera_processes import CameraProcesses
+
+    procs = CameraProcesses(None, None)
+    try:
+        procs.wait_ready(timeout=60.0)
+        assert procs._ready
+        procs.wait_ready()                       # once is enough: no second handshake
+    finally:
+        procs.close()

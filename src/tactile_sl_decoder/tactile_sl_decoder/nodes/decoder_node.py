@@ -86,6 +86,9 @@ class DecoderNode(Node):
         if self.input_mode == "images":    # fail at start, not on the first frame
             check_classifier(self.pipeline.load_classifier(), pattern.symbols,
                              s.classifier_weights or "(shipped)")
+            # the camera worker processes start and warm up (~1-2 s) before any image is
+            # subscribed to: the first frames would otherwise queue behind them and be lost
+            self.pipeline.wait_ready()
         sensor = (self.overrides.apply_to(load_sensor(s.sensor_file or None), s.pad_frame)
                   if s.touch else None)
         # the reference is prepared in a worker thread: images keep flowing meanwhile; the
