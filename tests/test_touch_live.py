@@ -27,7 +27,7 @@ class TouchSession:
     def __init__(self, probe: Probe) -> None:
         from geometry_msgs.msg import PoseStamped
         from rclpy.parameter_client import AsyncParameterClient
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from std_srvs.srv import Trigger
 
         from tactile_sl_msgs.msg import Contact
@@ -37,9 +37,13 @@ class TouchSession:
         self.references = 0
         qos = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
         probe.node.create_subscription(Contact, "/tactile/contact", self._on_contact, qos)
-        probe.node.create_subscription(PoseStamped, "/tactile/pad_pose", self._on_pose,
-                                       QoSProfile(depth=10,
-                                                  reliability=ReliabilityPolicy.RELIABLE))
+        # pad_pose is latched (transient local), once per reference: a volatile subscriber
+        # not yet matched when the first reference is announced (~0.5 s after the node's
+        # publishers appear) would never count it
+        probe.node.create_subscription(
+            PoseStamped, "/tactile/pad_pose", self._on_pose,
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL))
         self.tare_client = probe.node.create_client(Trigger, "/tactile/tare")
         self.params = AsyncParameterClient(probe.node, "/tactile/decoder")
         self.trigger = Trigger
