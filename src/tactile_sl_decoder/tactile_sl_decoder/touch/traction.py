@@ -240,6 +240,10 @@ class TractionSolver:
         """(N, 3N) float32: each cell's constrained-inversion pressure per displacement."""
         return self._support_rows
 
+    def normal_forward(self) -> np.ndarray:
+        """(N, N) float32: u_z of each cell per unit normal force on each (G's zz block)."""
+        return self._g32[2::3, 2::3]
+
     def normal_map_rows(self) -> np.ndarray:
         """(N, 3N) float32: each cell's normal map force (-pressing) per displacement."""
         return self._map_rows[2]
