@@ -114,6 +114,31 @@ def test_the_stage_reports_the_fitted_normal_displacement_on_a_noisy_pad(monkeyp
                                   for o in outs]))
            for name, outs in (("fitted", fitted), ("measured", measured))}
     assert err["fitted"] < 0.6 * err["measured"]
+    # the centroid takes the fitted pressure's as a third estimate
+    off = {name: np.mean([np.hypot(o.contact.centroid[0] - LOAD[4],
+                                   o.contact.centroid[1] - LOAD[5]) for o in outs])
+           for name, outs in (("fitted", fitted), ("measured", measured))}
+    assert off["fitted"] < 0.8 * off["measured"]
+
+
+def test_the_fitted_pressure_gives_a_centroid_with_its_variance(solver):
+    rng = np.random.default_rng(21)
+    truth = _displacement(ELASTOMER, [LOAD], 0.0, rng)[:, 2]
+    sigma = _sigma(22)
+    field = ConsistentField(solver.normal_forward(), sigma, solver.rows, solver.cols, SHAPE,
+                            NOMINAL)
+    valid = np.ones(len(ROWS), bool)
+    z = []
+    for _ in range(20):
+        measured = truth + rng.normal(0.0, 1.0, len(ROWS)) * sigma
+        assert field.fit(measured, valid, _contact(LOAD)) is not None
+        centre, var = field.last_centroid
+        assert np.all(var > 0)
+        z.append((centre - LOAD[4:6]) / np.sqrt(var))
+    # (the cells' pressure at cell resolution: exact to well below its noise here)
+    assert 0.5 < np.sqrt(np.mean(np.square(z))) < 2.0
+    assert _field(solver, sigma).fit(truth, valid, _contact(LOAD)) is not None
+    assert _field(solver, sigma).last_centroid is None           # no positions given
 
 
 def test_a_clean_pad_or_a_few_noisy_cells_get_no_fit():

@@ -84,7 +84,8 @@ class ConsistentField:
     """
 
     def __init__(self, forward: np.ndarray, sigma: np.ndarray, rows: np.ndarray,
-                 cols: np.ndarray, shape: tuple[int, int]) -> None:
+                 cols: np.ndarray, shape: tuple[int, int], xy: np.ndarray | None = None
+                 ) -> None:
         g = np.asarray(forward, np.float32)
         n = g.shape[0]
         if g.shape != (n, n) or np.shape(sigma) != (n,):
@@ -93,6 +94,7 @@ class ConsistentField:
         self.shape = (int(shape[0]), int(shape[1]))
         self.rows = np.asarray(rows, np.int64)
         self.cols = np.asarray(cols, np.int64)
+        self.xy = None if xy is None else np.asarray(xy, np.float64)[:, :2]
         self.weight = 1.0 / np.asarray(sigma, np.float64) ** 2
         self._weight32 = self.weight.astype(np.float32)
         # G^T (its rows: the data term G^T W u; G = its transpose: the fitted field) and
@@ -101,6 +103,9 @@ class ConsistentField:
         self._normal = np.ascontiguousarray(g.T @ (g * self._weight32[:, None]))
         self.last_cells = 0                  # |S| of the last frame's fit (0: none)
         self.last_chi2 = float("nan")        # its chi^2 per degree of freedom
+        self.last_centroid: tuple[np.ndarray, np.ndarray] | None = None
+        """The last fit's pressure centroid (2,) m and its variance (2,) m^2 per axis (with
+        ``xy``, a fit used, pressing): :meth:`fit`."""
 
     def contact_cells(self, core: np.ndarray) -> np.ndarray:
         """``core`` (N,) bool grown by one cell (8-connected): the unknowns S."""
@@ -120,7 +125,7 @@ class ConsistentField:
         """
         n = len(uz)
         cells = self.contact_cells(core) if np.any(core) else np.zeros(0, np.int64)
-        self.last_cells, self.last_chi2 = len(cells), float("nan")
+        self.last_cells, self.last_chi2, self.last_centroid = len(cells), float("nan"), None
         if len(cells) > MAX_SHARE * n:
             return None
         u = np.asarray(uz, np.float64)
@@ -134,9 +139,10 @@ class ConsistentField:
             diagonal = a.reshape(-1, order="F")[::len(cells) + 1]       # a view
             diagonal += FIT_WEIGHT * float(np.mean(diagonal))
             try:
-                p = cho_solve_upper(cho_factor_upper(a, overwrite_a=True), data)
+                factor = cho_factor_upper(a, overwrite_a=True)
             except np.linalg.LinAlgError:      # (G^T W G is positive definite: rounding)
                 return None
+            p = cho_solve_upper(factor, data)
             pred = (g_s.T @ p.astype(np.float32)).astype(np.float64)
         dof = int(np.count_nonzero(valid)) - len(cells)
         if dof <= 0:
@@ -145,18 +151,45 @@ class ConsistentField:
         self.last_chi2 = float(np.sum(self.weight[valid] * resid * resid)) / dof
         if not self.last_chi2 <= CHI2_LIMIT:
             return None
+        if len(cells) and self.xy is not None:
+            self.last_centroid = _centroid(-p, self.xy[cells], factor,
+                                           max(1.0, self.last_chi2))
         return pred
 
 
-def for_reference(solver: Any, weights: Any, shape: tuple[int, int]) -> ConsistentField | None:
+def for_reference(solver: Any, weights: Any, shape: tuple[int, int],
+                  xy: np.ndarray | None = None) -> ConsistentField | None:
     """The fit of a reference, or None where it is not wanted (module docstring).
 
     Also None with ``WeightParams.fit_normal`` off.  ``solver``: its
     :class:`~.traction.TractionSolver`; ``weights``: its :class:`~.weights.CellWeights`
-    (None with the weights off).
+    (None with the weights off); ``xy`` (N, 2) the cells' rest positions (pad frame): the
+    fit's pressure centroid (:attr:`ConsistentField.last_centroid`).
     """
     if weights is None or not weights.params.fit_normal or (
             len(weights.noisy) <= MIN_NOISY_SHARE * len(weights.rows)):
         return None
     return ConsistentField(solver.normal_forward(), weights.effective[:, 2], solver.rows,
-                           solver.cols, shape)
+                           solver.cols, shape, xy)
+
+
+def _centroid(press: np.ndarray, xy: np.ndarray, factor: np.ndarray, birge: float = 1.0
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Centroid (2,) of the fitted pressure and its variance (2,); None if it does not press.
+
+    ``press`` N per cell of S (> 0 pressing), ``xy`` (|S|, 2) their positions.
+
+    c = sum p_j r_j / P is exact for a pressure on the pad's plane; to first order its error
+    is v^T dp with v_j = (r_j - c) / P, and the generalised least-squares pressure's
+    covariance is (G_S^T W G_S)^-1 (Aitken 1935; with the weak Tikhonov term, its inverse
+    normal matrix, whose Cholesky ``factor`` the fit made), so var c = v^T A^-1 v, times
+    ``birge``, the fit's chi^2 per degree of freedom when above 1 (Birge, Phys. Rev. 40,
+    207, 1932: errors scaled by how far the residual exceeds the expected one).
+    """
+    total = float(press.sum())
+    if not total > 0:
+        return None
+    c = press @ xy / total
+    v = (xy - c) / total                                  # (|S|, 2)
+    var = birge * np.einsum("ka,ka->a", v, cho_solve_upper(factor, v))
+    return c, np.maximum(var, 0.0)

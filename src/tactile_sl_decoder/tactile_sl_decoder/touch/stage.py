@@ -312,7 +312,7 @@ class TouchStage:
         weights = (CellWeights(solver.rows, solver.cols, self.shape, rest, nominal, frames,
                                self.params.weights) if self.params.weights.enabled else None)
         noise = reference_noise(weights, solver, self.params.contact.displacement_noise)
-        consistent = for_reference(solver, weights, self.shape)
+        consistent = for_reference(solver, weights, self.shape, nominal)
         return cells, rest, pose, frames, nominal, solver, weights, noise, consistent
 
     def _reusable_solver(self, cells: np.ndarray) -> TractionSolver | None:
@@ -438,12 +438,13 @@ class TouchStage:
             fitted = ref.consistent.fit(disp_ref[:, 2], valid, core)
             if fitted is not None:
                 displacement[known, 2] = fitted[k[known]]
+        fit_centroid = None if ref.consistent is None else ref.consistent.last_centroid
         indent = np.full(self.shape, np.nan)
         indent[rows, cols] = -displacement[:, 2]
         contact = contact_state(ref.nominal[:, :2], ref_rows, ref_cols, forces_ref, wrench,
                                 self.shape, self.pitch, indent, self._in_contact,
                                 contact_params, ref_noise.moment, support, ref_noise.map,
-                                ref_noise.centroid)
+                                ref_noise.centroid, fit_centroid)
         self._in_contact = contact.in_contact
         depth = self._depth(indent)
         force = np.zeros((len(rows), 3))
