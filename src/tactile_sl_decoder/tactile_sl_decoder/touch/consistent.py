@@ -34,6 +34,12 @@ model does not explain the field (a contact the support missed, a pull, a pad wh
 changed after the tare) and the measured field is kept.  Also kept when S holds more than
 ``MAX_SHARE`` of the cells: the fit then removes less than half the noise and costs the most.
 
+The fitted pressure is also an estimate of the contact's normal force (its sum) and
+centroid, each with its variance from the fit's covariance (G_S^T W G_S)^-1: the stage
+combines them with the resultant's (:meth:`ConsistentField.normal_force`) and with the
+map's and the resultant's centroids (:func:`~.contact.contact_state`) by inverse variance.
+Noise far from the contact cannot pull them: those cells carry no unknown.
+
 S is the support of the constrained pressure (:meth:`~.traction.TractionSolver.support_pressure`:
 cells pressing by ``support_sigmas`` x their noise) or, where that cannot locate the edge of a
 faint contact, the map's cells above the area fraction of its peak; grown by one cell (the
@@ -84,8 +90,8 @@ class ConsistentField:
     """
 
     def __init__(self, forward: np.ndarray, sigma: np.ndarray, rows: np.ndarray,
-                 cols: np.ndarray, shape: tuple[int, int], xy: np.ndarray | None = None
-                 ) -> None:
+                 cols: np.ndarray, shape: tuple[int, int], xy: np.ndarray | None = None,
+                 resultant_sd: float = 0.0) -> None:
         g = np.asarray(forward, np.float32)
         n = g.shape[0]
         if g.shape != (n, n) or np.shape(sigma) != (n,):
@@ -95,6 +101,8 @@ class ConsistentField:
         self.rows = np.asarray(rows, np.int64)
         self.cols = np.asarray(cols, np.int64)
         self.xy = None if xy is None else np.asarray(xy, np.float64)[:, :2]
+        self.resultant_sd = float(resultant_sd)
+        """N: the resultant's normal force noise (0: the fitted force is not combined)."""
         self.weight = 1.0 / np.asarray(sigma, np.float64) ** 2
         self._weight32 = self.weight.astype(np.float32)
         # G^T (its rows: the data term G^T W u; G = its transpose: the fitted field) and
@@ -106,6 +114,9 @@ class ConsistentField:
         self.last_centroid: tuple[np.ndarray, np.ndarray] | None = None
         """The last fit's pressure centroid (2,) m and its variance (2,) m^2 per axis (with
         ``xy``, a fit used, pressing): :meth:`fit`."""
+        self.last_force: tuple[float, float] | None = None
+        """The last fit's normal force (N, pressing > 0) and its variance (N^2) (a fit
+        used, pressing)."""
 
     def contact_cells(self, core: np.ndarray) -> np.ndarray:
         """``core`` (N,) bool grown by one cell (8-connected): the unknowns S."""
@@ -125,7 +136,8 @@ class ConsistentField:
         """
         n = len(uz)
         cells = self.contact_cells(core) if np.any(core) else np.zeros(0, np.int64)
-        self.last_cells, self.last_chi2, self.last_centroid = len(cells), float("nan"), None
+        self.last_cells, self.last_chi2 = len(cells), float("nan")
+        self.last_centroid = self.last_force = None
         if len(cells) > MAX_SHARE * n:
             return None
         u = np.asarray(uz, np.float64)
@@ -151,26 +163,51 @@ class ConsistentField:
         self.last_chi2 = float(np.sum(self.weight[valid] * resid * resid)) / dof
         if not self.last_chi2 <= CHI2_LIMIT:
             return None
-        if len(cells) and self.xy is not None:
-            self.last_centroid = _centroid(-p, self.xy[cells], factor,
-                                           max(1.0, self.last_chi2))
+        if len(cells):
+            birge = max(1.0, self.last_chi2)
+            force = -float(p.sum())
+            if force > 0:
+                one = np.ones(len(cells))
+                self.last_force = (force, birge * float(one @ cho_solve_upper(factor, one)))
+            if self.xy is not None:
+                self.last_centroid = _centroid(-p, self.xy[cells], factor, birge)
         return pred
+
+    def normal_force(self, resultant: float) -> float | None:
+        """The normal force (N, > 0 pressing) combining the resultant's and the last fit's.
+
+        Per inverse variance (the minimum-variance unbiased combination of two estimates):
+        the resultant's noise is ``resultant_sd``, the fitted pressure's sum has the variance
+        1^T (G_S^T W G_S)^-1 1 (Aitken 1935), scaled like the centroid's.  None when the last
+        frame was not fitted, either does not press, or ``resultant_sd`` is 0.
+        """
+        if self.last_force is None or not resultant > 0 or not self.resultant_sd > 0:
+            return None
+        force, var = self.last_force
+        w_res, w_fit = 1.0 / self.resultant_sd ** 2, 1.0 / max(var, 1e-30)
+        return (w_res * resultant + w_fit * force) / (w_res + w_fit)
 
 
 def for_reference(solver: Any, weights: Any, shape: tuple[int, int],
-                  xy: np.ndarray | None = None) -> ConsistentField | None:
+                  xy: np.ndarray | None = None, displacement_noise: float = 0.0
+                  ) -> ConsistentField | None:
     """The fit of a reference, or None where it is not wanted (module docstring).
 
     Also None with ``WeightParams.fit_normal`` off.  ``solver``: its
     :class:`~.traction.TractionSolver`; ``weights``: its :class:`~.weights.CellWeights`
     (None with the weights off); ``xy`` (N, 2) the cells' rest positions (pad frame): the
-    fit's pressure centroid (:attr:`ConsistentField.last_centroid`).
+    fit's pressure centroid (:attr:`ConsistentField.last_centroid`).  The resultant's
+    normal force noise is propagated from the cells' expected errors, never below
+    ``displacement_noise`` on every cell's.
     """
     if weights is None or not weights.params.fit_normal or (
             len(weights.noisy) <= MIN_NOISY_SHARE * len(weights.rows)):
         return None
+    row = np.asarray(solver.normal_force_row(), np.float64)
+    resultant_sd = max(float(weights.propagated(row[None, :])[0]),
+                       displacement_noise * float(np.linalg.norm(row)))
     return ConsistentField(solver.normal_forward(), weights.effective[:, 2], solver.rows,
-                           solver.cols, shape, xy)
+                           solver.cols, shape, xy, resultant_sd)
 
 
 def _centroid(press: np.ndarray, xy: np.ndarray, factor: np.ndarray, birge: float = 1.0

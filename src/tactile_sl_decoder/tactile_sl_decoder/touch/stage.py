@@ -312,7 +312,8 @@ class TouchStage:
         weights = (CellWeights(solver.rows, solver.cols, self.shape, rest, nominal, frames,
                                self.params.weights) if self.params.weights.enabled else None)
         noise = reference_noise(weights, solver, self.params.contact.displacement_noise)
-        consistent = for_reference(solver, weights, self.shape, nominal)
+        consistent = for_reference(solver, weights, self.shape, nominal,
+                                   self.params.contact.displacement_noise)
         return cells, rest, pose, frames, nominal, solver, weights, noise, consistent
 
     def _reusable_solver(self, cells: np.ndarray) -> TractionSolver | None:
@@ -438,6 +439,16 @@ class TouchStage:
             fitted = ref.consistent.fit(disp_ref[:, 2], valid, core)
             if fitted is not None:
                 displacement[known, 2] = fitted[k[known]]
+            normal = ref.consistent.normal_force(-float(wrench[2]))
+            if normal is not None:
+                # the normal force with the fitted pressure's; the resultant's line of action
+                # (M_x, M_y scale with it) and the map's shares are kept
+                scale = normal / -float(wrench[2])
+                wrench = wrench.copy()
+                wrench[2:5] *= scale
+                forces_ref = forces_ref.copy()
+                forces_ref[:, 2] *= scale
+                wrench_force, wrench_moment = wrench[:3], wrench[3:]
         fit_centroid = None if ref.consistent is None else ref.consistent.last_centroid
         indent = np.full(self.shape, np.nan)
         indent[rows, cols] = -displacement[:, 2]

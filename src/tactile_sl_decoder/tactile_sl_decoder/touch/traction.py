@@ -232,6 +232,10 @@ class TractionSolver:
 
     # ------------------------------------------------------------------ helpers
 
+    def normal_force_row(self) -> np.ndarray:
+        """(3N,): the resultant's F_z as a functional of the displacement."""
+        return self._wrench_rows[2]
+
     def moment_rows(self) -> np.ndarray:
         """(2, 3N): the resultant's M_x and M_y as functionals of the displacement."""
         return self._wrench_rows[3:5]
