@@ -105,7 +105,7 @@ def test_the_stage_reports_the_fitted_normal_displacement_on_a_noisy_pad(monkeyp
 
     stage, fitted = run()
     assert stage.reference.consistent is not None
-    monkeypatch.setattr(ConsistentField, "fit", lambda self, *args: None)
+    monkeypatch.setattr(ConsistentField, "fit", lambda self, *args, **kwargs: None)
     _, measured = run()
     for a, b in zip(fitted, measured):
         assert np.array_equal(a.force[:, :2], b.force[:, :2])
@@ -186,3 +186,30 @@ def test_the_normal_force_combines_the_resultant_and_the_fit_by_their_variances(
     assert field.normal_force(-0.1) is None                     # the resultant pulls
     field.resultant_sd = 0.0
     assert field.normal_force(0.3) is None                      # no noise model: as it was
+
+
+def test_a_faint_contact_is_fitted_per_block_of_cells(solver):
+    # a wide, faint load under strong noise: its pressure uniform over 2 x 2 cells, a
+    # quarter of the unknowns, still explains the field and removes more of the noise
+    faint = (0.0, 0.0, -0.05, 3e-3, 0.5e-3, 0.0)
+    rng = np.random.default_rng(31)
+    truth = _displacement(ELASTOMER, [faint], 0.0, rng)[:, 2]
+    sigma = _sigma(32)
+    field = ConsistentField(solver.normal_forward(), sigma, solver.rows, solver.cols, SHAPE,
+                            NOMINAL)
+    valid = np.ones(len(ROWS), bool)
+    core = _contact(faint)
+    errors, forces = [], []
+    for _ in range(5):
+        measured = truth + rng.normal(0.0, 1.0, len(ROWS)) * sigma
+        fine = field.fit(measured, valid, core)
+        cells = field.last_cells
+        coarse = field.fit(measured, valid, core, coarse=True)
+        assert fine is not None and coarse is not None
+        assert cells / 4 <= field.last_cells < cells / 2       # blocks of 2 x 2 cells
+        assert field.last_chi2 < 1.6
+        forces.append(field.last_force[0])
+        errors.append([np.sqrt(np.mean((x - truth) ** 2)) for x in (measured, fine, coarse)])
+    measured_err, fine_err, coarse_err = np.mean(errors, axis=0)
+    assert coarse_err < fine_err < measured_err
+    assert np.mean(forces) == pytest.approx(0.05, rel=0.05)

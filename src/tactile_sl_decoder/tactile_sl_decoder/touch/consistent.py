@@ -43,8 +43,14 @@ Noise far from the contact cannot pull them: those cells carry no unknown.
 S is the support of the constrained pressure (:meth:`~.traction.TractionSolver.support_pressure`:
 cells pressing by ``support_sigmas`` x their noise) or, where that cannot locate the edge of a
 faint contact, the map's cells above the area fraction of its peak; grown by one cell (the
-cells the edge cuts).  Only the normal component is fitted: for a nearly incompressible pad
-the normal pressure moves the surface along its normal and the shear tractions within it
+cells the edge cuts).  A faint contact's pressure is taken uniform over blocks of
+``COARSE_BLOCK`` x ``COARSE_BLOCK`` cells (those S touches): the data that cannot locate its
+edge cannot resolve it at a cell's scale either, and a quarter of the unknowns removes more
+of the noise (on the harsh 0.1 N frames 125-130 unknowns instead of 415-431, over the
+``MAX_SHARE`` a per-cell fit may have).
+
+Only the normal component is fitted: for a nearly incompressible pad the normal pressure
+moves the surface along its normal and the shear tractions within it
 (the coupling is (1 - 2 nu) / (2 (1 - nu)) of either, 2 % at nu = 0.49), and the in-plane
 error is about 3 x smaller than the normal one; the in-plane displacement stays as measured.
 
@@ -76,8 +82,33 @@ twice the cells' expected errors)."""
 MIN_NOISY_SHARE = 0.25
 """A reference is fitted when more than this share of its cells are noisy."""
 MAX_SHARE = 0.5
-"""The fit is skipped when the contact's cells (grown by one) are more than this share of the
-reference's cells."""
+"""The fit is skipped when its unknowns are more than this share of the reference's cells."""
+COARSE_BLOCK = 2
+"""A contact too faint for the support to locate its edge is fitted with a pressure uniform
+over blocks of this many x this many cells."""
+
+
+class _Basis:
+    """The unknowns of a fit: a pressure uniform over each element (a cell, or a block).
+
+    ``forward_t`` (E, N) float32: u_z of every cell per unit force on each of the element's
+    cells (G^T's rows); ``normal`` (E, E) float32: G^T W G; ``of_cell`` (N,): each cell's
+    element; ``count`` (E,): its cells; ``xy`` (E, 2): where its force acts (its cells' mean
+    position), or None.
+    """
+
+    def __init__(self, g: np.ndarray, weight32: np.ndarray, of_cell: np.ndarray,
+                 xy: np.ndarray | None) -> None:
+        n = g.shape[0]
+        elements = int(of_cell.max()) + 1 if n else 0
+        member = np.zeros((n, elements), np.float32)
+        member[np.arange(n), of_cell] = 1.0
+        ge = g if elements == n and np.array_equal(of_cell, np.arange(n)) else g @ member
+        self.of_cell = of_cell
+        self.count = member.sum(axis=0).astype(np.float64)
+        self.forward_t = np.ascontiguousarray(ge.T)
+        self.normal = np.ascontiguousarray(ge.T @ (ge * weight32[:, None]))
+        self.xy = None if xy is None else member.T.astype(np.float64) @ xy / self.count[:, None]
 
 
 class ConsistentField:
@@ -106,10 +137,14 @@ class ConsistentField:
         self.weight = 1.0 / np.asarray(sigma, np.float64) ** 2
         self._weight32 = self.weight.astype(np.float32)
         # G^T (its rows: the data term G^T W u; G = its transpose: the fitted field) and
-        # the normal matrix G^T W G, both float32 (the frame's products are memory-bound)
-        self._forward_t = np.ascontiguousarray(g.T)
-        self._normal = np.ascontiguousarray(g.T @ (g * self._weight32[:, None]))
-        self.last_cells = 0                  # |S| of the last frame's fit (0: none)
+        # the normal matrix G^T W G, both float32 (the frame's products are memory-bound),
+        # per cell and per block of COARSE_BLOCK x COARSE_BLOCK cells
+        self._cells = _Basis(g, self._weight32, np.arange(n), self.xy)
+        blocks = ((self.rows // COARSE_BLOCK) * (self.shape[1] // COARSE_BLOCK + 1)
+                  + self.cols // COARSE_BLOCK)
+        self._blocks = _Basis(g, self._weight32, np.unique(blocks, return_inverse=True)[1]
+                              .reshape(-1), self.xy)
+        self.last_cells = 0                  # unknowns of the last frame's fit (0: none)
         self.last_chi2 = float("nan")        # its chi^2 per degree of freedom
         self.last_centroid: tuple[np.ndarray, np.ndarray] | None = None
         """The last fit's pressure centroid (2,) m and its variance (2,) m^2 per axis (with
@@ -125,17 +160,22 @@ class ConsistentField:
         grown = cv2.dilate(grid, np.ones((3, 3), np.uint8))
         return np.flatnonzero(grown[self.rows, self.cols])
 
-    def fit(self, uz: np.ndarray, valid: np.ndarray, core: np.ndarray) -> np.ndarray | None:
+    def fit(self, uz: np.ndarray, valid: np.ndarray, core: np.ndarray,
+            coarse: bool = False) -> np.ndarray | None:
         """The fitted u_z (N,) m of every reference cell, or None where the model fails.
 
         ``uz`` (N,) the cleaned normal displacement (missing cells filled), ``valid`` the
         cells decoded in this frame (the chi^2 test counts only those), ``core`` the cells in
-        contact (before growing; none: the model of an untouched pad, u_z = 0).  None when S
-        is more than ``MAX_SHARE`` of the cells or chi^2 per degree of freedom exceeds
-        ``CHI2_LIMIT`` (the measured field is kept then).
+        contact (before growing; none: the model of an untouched pad, u_z = 0); ``coarse``:
+        the pressure uniform over blocks of ``COARSE_BLOCK`` cells (those S touches).  None
+        when the unknowns are more than ``MAX_SHARE`` of the cells or chi^2 per degree of
+        freedom exceeds ``CHI2_LIMIT`` (the measured field is kept then).
         """
         n = len(uz)
+        basis = self._blocks if coarse else self._cells
         cells = self.contact_cells(core) if np.any(core) else np.zeros(0, np.int64)
+        if coarse:
+            cells = np.unique(basis.of_cell[cells])
         self.last_cells, self.last_chi2 = len(cells), float("nan")
         self.last_centroid = self.last_force = None
         if len(cells) > MAX_SHARE * n:
@@ -144,10 +184,10 @@ class ConsistentField:
         pred = np.zeros(n)
         if len(cells):
             # only the rows of S are read: G_S^T, and G^T W G's block, rows then columns
-            g_s = self._forward_t[cells]
+            g_s = basis.forward_t[cells]
             data = g_s @ (self._weight32 * u.astype(np.float32))
             # (symmetric: the transpose of the C-ordered block is the Fortran-ordered one)
-            a = np.array(self._normal[cells][:, cells].T, np.float64, order="F")
+            a = np.array(basis.normal[cells][:, cells].T, np.float64, order="F")
             diagonal = a.reshape(-1, order="F")[::len(cells) + 1]       # a view
             diagonal += FIT_WEIGHT * float(np.mean(diagonal))
             try:
@@ -165,12 +205,13 @@ class ConsistentField:
             return None
         if len(cells):
             birge = max(1.0, self.last_chi2)
-            force = -float(p.sum())
+            count = basis.count[cells]            # p is the force on each of their cells
+            force = -float(count @ p)
             if force > 0:
-                one = np.ones(len(cells))
-                self.last_force = (force, birge * float(one @ cho_solve_upper(factor, one)))
-            if self.xy is not None:
-                self.last_centroid = _centroid(-p, self.xy[cells], factor, birge)
+                self.last_force = (force,
+                                   birge * float(count @ cho_solve_upper(factor, count)))
+            if basis.xy is not None:
+                self.last_centroid = _centroid(-p, basis.xy[cells], factor, birge, count)
         return pred
 
     def normal_force(self, resultant: float) -> float | None:
@@ -210,11 +251,12 @@ def for_reference(solver: Any, weights: Any, shape: tuple[int, int],
                            solver.cols, shape, xy, resultant_sd)
 
 
-def _centroid(press: np.ndarray, xy: np.ndarray, factor: np.ndarray, birge: float = 1.0
-              ) -> tuple[np.ndarray, np.ndarray] | None:
+def _centroid(press: np.ndarray, xy: np.ndarray, factor: np.ndarray, birge: float = 1.0,
+              count: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     """Centroid (2,) of the fitted pressure and its variance (2,); None if it does not press.
 
-    ``press`` N per cell of S (> 0 pressing), ``xy`` (|S|, 2) their positions.
+    ``press`` N per cell of each unknown (> 0 pressing), ``xy`` (|S|, 2) where each acts,
+    ``count`` its cells (1 each when None).
 
     c = sum p_j r_j / P is exact for a pressure on the pad's plane; to first order its error
     is v^T dp with v_j = (r_j - c) / P, and the generalised least-squares pressure's
@@ -223,10 +265,11 @@ def _centroid(press: np.ndarray, xy: np.ndarray, factor: np.ndarray, birge: floa
     ``birge``, the fit's chi^2 per degree of freedom when above 1 (Birge, Phys. Rev. 40,
     207, 1932: errors scaled by how far the residual exceeds the expected one).
     """
-    total = float(press.sum())
+    count = np.ones(len(press)) if count is None else count
+    total = float(count @ press)
     if not total > 0:
         return None
-    c = press @ xy / total
-    v = (xy - c) / total                                  # (|S|, 2)
+    c = (count * press) @ xy / total
+    v = count[:, None] * (xy - c) / total                 # (|S|, 2)
     var = birge * np.einsum("ka,ka->a", v, cho_solve_upper(factor, v))
     return c, np.maximum(var, 0.0)

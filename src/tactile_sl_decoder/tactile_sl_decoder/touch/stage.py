@@ -436,7 +436,9 @@ class TouchStage:
                 peak = float(press.max()) if len(press) else 0.0
                 core = press > contact_params.area_fraction * peak if peak > 0 else (
                     np.zeros(n, bool))
-            fitted = ref.consistent.fit(disp_ref[:, 2], valid, core)
+            # (a contact whose edge the support cannot locate: its pressure at half the
+            # resolution, which the data cannot resolve finer)
+            fitted = ref.consistent.fit(disp_ref[:, 2], valid, core, coarse=support is None)
             if fitted is not None:
                 displacement[known, 2] = fitted[k[known]]
             normal = ref.consistent.normal_force(-float(wrench[2]))
