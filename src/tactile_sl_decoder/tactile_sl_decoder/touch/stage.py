@@ -437,8 +437,10 @@ class TouchStage:
                 core = press > contact_params.area_fraction * peak if peak > 0 else (
                     np.zeros(n, bool))
             # (a contact whose edge the support cannot locate: its pressure at half the
-            # resolution, which the data cannot resolve finer)
-            fitted = ref.consistent.fit(disp_ref[:, 2], valid, core, coarse=support is None)
+            # resolution, which the data cannot resolve finer; without a support inversion,
+            # support_weight 0, per cell)
+            fitted = ref.consistent.fit(disp_ref[:, 2], valid, core,
+                                        coarse=support is None and self.solver.has_support)
             if fitted is not None:
                 displacement[known, 2] = fitted[k[known]]
             normal = ref.consistent.normal_force(-float(wrench[2]))
