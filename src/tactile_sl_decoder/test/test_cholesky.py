@@ -25,6 +25,17 @@ def test_factor_and_solves_equal_scipy_bit_for_bit():
         assert np.array_equal(x, ref) and x.flags.f_contiguous == ref.flags.f_contiguous
 
 
+def test_overwrite_factors_a_fortran_float64_array_in_place_and_copies_others():
+    _, h = _spd(50, seed=1)
+    want = cho_factor_upper(h)
+    a = np.asfortranarray(h)
+    got = cho_factor_upper(a, overwrite_a=True)
+    assert got is a and np.array_equal(got, want)
+    c_ordered = np.ascontiguousarray(h)          # not Fortran-ordered: copied, left as it was
+    assert np.array_equal(cho_factor_upper(c_ordered, overwrite_a=True), want)
+    assert np.array_equal(c_ordered, h)
+
+
 def test_not_positive_definite_and_bad_shapes_are_clear_errors():
     with pytest.raises(np.linalg.LinAlgError, match="positive definite"):
         cho_factor_upper(-np.eye(4))

@@ -236,3 +236,13 @@ def test_a_noisy_map_leans_the_centroid_on_the_resultant():
                           centroid_noise=np.full(len(ROWS), 2e-2))
     assert abs(quiet.centroid[0] - 1e-3) < 0.1e-3
     assert abs(noisy.centroid[0] - 1.3e-3) < abs(quiet.centroid[0] - 1.3e-3) - 0.1e-3
+    # a third estimate, the pressure fitted on the contact's cells (touch/consistent.py),
+    # counts by its variance: a sharp one decides, a vague one leaves the two others
+    sharp = contact_state(*args, map_noise=np.full(len(ROWS), 1e-5),
+                          centroid_noise=np.full(len(ROWS), 2e-2),
+                          fit_centroid=(np.array([0.9e-3, 1.1e-3]), np.full(2, 1e-12)))
+    assert np.allclose(sharp.centroid[:2], (0.9e-3, 1.1e-3), atol=5e-6)
+    vague = contact_state(*args, map_noise=np.full(len(ROWS), 1e-5),
+                          centroid_noise=np.full(len(ROWS), 2e-2),
+                          fit_centroid=(np.array([0.9e-3, 1.1e-3]), np.full(2, 1.0)))
+    assert np.allclose(vague.centroid[:2], noisy.centroid[:2], atol=1e-7)

@@ -43,14 +43,18 @@ def _ptr(a: np.ndarray) -> Any:
     return a.ctypes.data_as(_DBL)
 
 
-def cho_factor_upper(a: np.ndarray) -> np.ndarray:
+def cho_factor_upper(a: np.ndarray, overwrite_a: bool = False) -> np.ndarray:
     """Upper Cholesky factor U (A = U^T U) of a symmetric positive definite matrix.
 
     Equal to ``scipy.linalg.cho_factor(a, lower=False)[0]``: a Fortran-ordered copy whose
     strict lower triangle still holds A's values (only :func:`cho_solve_upper` reads it).
-    Raises ``numpy.linalg.LinAlgError`` if A is not positive definite.
+    ``overwrite_a``: factor ``a`` itself when it is a Fortran-ordered float64 array (no
+    copy; a per-frame solve). Raises ``numpy.linalg.LinAlgError`` if A is not positive
+    definite.
     """
-    c = np.array(a, dtype=np.float64, order="F", copy=True)
+    c = a if overwrite_a and isinstance(a, np.ndarray) and a.dtype == np.float64 and (
+        a.flags.f_contiguous and a.flags.writeable) else np.array(
+            a, dtype=np.float64, order="F", copy=True)
     if c.ndim != 2 or c.shape[0] != c.shape[1]:
         raise ValueError(f"a square matrix is needed, got shape {c.shape}")
     n = ctypes.c_int(c.shape[0])

@@ -337,7 +337,8 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                   moment_noise: tuple[float, float] = (0.0, 0.0),
                   support: tuple[np.ndarray, np.ndarray] | None = None,
                   map_noise: np.ndarray | None = None,
-                  centroid_noise: np.ndarray | None = None) -> ContactState:
+                  centroid_noise: np.ndarray | None = None,
+                  fit_centroid: tuple[np.ndarray, np.ndarray] | None = None) -> ContactState:
     """Contact state from per-cell forces (N) at rest positions (m) and the resultant.
 
     Normal and shear force come from the resultant.  The regions come from the per-cell
@@ -425,8 +426,14 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
         spread.append(_centroid_variance(
             core, rest_xy[sel], c, None if centroid_noise is None else centroid_noise[sel]))
     from_wrench = np.array([float(wrench[4]) / normal, -float(wrench[3]) / normal])
+    var_wrench = (params.displacement_noise * np.array([moment_noise[1], moment_noise[0]])
+                  / normal) ** 2
+    w_wrench = 1.0 / np.maximum(var_wrench, 1e-30)
+    estimates = [(w_wrench, from_wrench)]
+    if fit_centroid is not None:    # the pressure fitted on the contact's cells
+        estimates.append((1.0 / np.maximum(fit_centroid[1], 1e-30), fit_centroid[0]))
     if not regions:          # every region a ripple of the noise: the resultant's centroid
-        state.centroid = (float(from_wrench[0]), float(from_wrench[1]), 0.0)
+        state.centroid = _combined(estimates)
         return state
     order = sorted(range(len(regions)), key=lambda i: -regions[i][0])   # stable, as sort
     regions = [regions[i] for i in order]
@@ -440,14 +447,19 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     from_map = np.array([sum(f * c[i] for f, c in zip(state.region_force,
                                                       state.region_centroid)) / total
                          for i in (0, 1)])
-    var_wrench = (params.displacement_noise * np.array([moment_noise[1], moment_noise[0]])
-                  / normal) ** 2
     w_map = 1.0 / (params.map_centroid_sigma ** 2
                    + sum((f / total) ** 2 * v for f, v in zip(state.region_force, spread)))
-    w_wrench = 1.0 / np.maximum(var_wrench, 1e-30)
-    cx, cy = (w_map * from_map + w_wrench * from_wrench) / (w_map + w_wrench)
-    state.centroid = (float(cx), float(cy), 0.0)
+    state.centroid = _combined([(np.full(2, w_map), from_map)] + estimates)
     return state
+
+
+def _combined(estimates: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, float, float]:
+    """Per axis, the inverse-variance combination of (weight (2,), centroid (2,)) estimates."""
+    if len(estimates) == 1:
+        return (float(estimates[0][1][0]), float(estimates[0][1][1]), 0.0)
+    weight = sum(w for w, _ in estimates)
+    c = sum(w * c for w, c in estimates) / weight
+    return (float(c[0]), float(c[1]), 0.0)
 
 
 RIPPLE_SIGMAS = 8.0

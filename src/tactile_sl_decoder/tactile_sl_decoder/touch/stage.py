@@ -33,6 +33,7 @@ import numpy as np
 
 from tactile_sl_common.elasticity import check_layer_resolved
 from tactile_sl_common.settings import SettingsTable
+from tactile_sl_decoder.touch.consistent import ConsistentField, for_reference
 from tactile_sl_decoder.touch.contact import (
     ContactParams,
     ContactState,
@@ -115,6 +116,9 @@ class Reference:
     with the weights off"""
     noise: ReferenceNoise
     """what those errors give the resultant's moments, the map and the contact area"""
+    consistent: ConsistentField | None = None
+    """the normal displacement fitted by the contact's pressure (:mod:`.consistent`); only
+    on a pad where most cells are noisy"""
 
 
 @dataclass
@@ -308,7 +312,9 @@ class TouchStage:
         weights = (CellWeights(solver.rows, solver.cols, self.shape, rest, nominal, frames,
                                self.params.weights) if self.params.weights.enabled else None)
         noise = reference_noise(weights, solver, self.params.contact.displacement_noise)
-        return cells, rest, pose, frames, nominal, solver, weights, noise
+        consistent = for_reference(solver, weights, self.shape, nominal,
+                                   self.params.contact.displacement_noise)
+        return cells, rest, pose, frames, nominal, solver, weights, noise, consistent
 
     def _reusable_solver(self, cells: np.ndarray) -> TractionSolver | None:
         """The last reference's inversion if it was made for these very cells."""
@@ -319,7 +325,7 @@ class TouchStage:
         return last
 
     def _set_reference(self, prepared: tuple[Any, ...]) -> None:
-        cells, rest, pose, frames, nominal, solver, weights, noise = prepared
+        cells, rest, pose, frames, nominal, solver, weights, noise, consistent = prepared
         self.solver = solver
         self._area_fraction = solver.area_fraction
         self._index[:] = -1
@@ -328,7 +334,8 @@ class TouchStage:
                                                         self.shape[1]),
                                              self.shape, self.pitch, self.mirrored)
         self._rest_table[cells] = rest
-        self.reference = Reference(cells, rest, pose, frames, nominal, weights, noise)
+        self.reference = Reference(cells, rest, pose, frames, nominal, weights, noise,
+                                   consistent)
 
     @property
     def contact_params(self) -> ContactParams:
@@ -411,8 +418,6 @@ class TouchStage:
         t2 = time.perf_counter()
         ref_rows, ref_cols = self.solver.rows, self.solver.cols
         wrench_force, wrench_moment = wrench[:3], wrench[3:]
-        indent = np.full(self.shape, np.nan)
-        indent[rows, cols] = -displacement[:, 2]
         contact_params = self.contact_params
         noise = contact_params.displacement_noise
         ref_noise = ref.noise
@@ -422,10 +427,39 @@ class TouchStage:
                                                 cell_noise=cell_noise)
         support = None if pressure is None else (
             pressure, noise * self.solver.support_gain if cell_noise is None else cell_noise)
+        if ref.consistent is not None:
+            # the normal displacement the contact's pressure explains (:mod:`.consistent`)
+            if support is not None:
+                core = support[0] > contact_params.support_sigmas * support[1]
+            else:
+                press = -forces_ref[:, 2]
+                peak = float(press.max()) if len(press) else 0.0
+                core = press > contact_params.area_fraction * peak if peak > 0 else (
+                    np.zeros(n, bool))
+            # (a contact whose edge the support cannot locate: its pressure at half the
+            # resolution, which the data cannot resolve finer; without a support inversion,
+            # support_weight 0, per cell)
+            fitted = ref.consistent.fit(disp_ref[:, 2], valid, core,
+                                        coarse=support is None and self.solver.has_support)
+            if fitted is not None:
+                displacement[known, 2] = fitted[k[known]]
+            normal = ref.consistent.normal_force(-float(wrench[2]))
+            if normal is not None:
+                # the normal force with the fitted pressure's; the resultant's line of action
+                # (M_x, M_y scale with it) and the map's shares are kept
+                scale = normal / -float(wrench[2])
+                wrench = wrench.copy()
+                wrench[2:5] *= scale
+                forces_ref = forces_ref.copy()
+                forces_ref[:, 2] *= scale
+                wrench_force, wrench_moment = wrench[:3], wrench[3:]
+        fit_centroid = None if ref.consistent is None else ref.consistent.last_centroid
+        indent = np.full(self.shape, np.nan)
+        indent[rows, cols] = -displacement[:, 2]
         contact = contact_state(ref.nominal[:, :2], ref_rows, ref_cols, forces_ref, wrench,
                                 self.shape, self.pitch, indent, self._in_contact,
                                 contact_params, ref_noise.moment, support, ref_noise.map,
-                                ref_noise.centroid)
+                                ref_noise.centroid, fit_centroid)
         self._in_contact = contact.in_contact
         depth = self._depth(indent)
         force = np.zeros((len(rows), 3))

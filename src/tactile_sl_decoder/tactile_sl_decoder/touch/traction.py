@@ -232,6 +232,10 @@ class TractionSolver:
 
     # ------------------------------------------------------------------ helpers
 
+    def normal_force_row(self) -> np.ndarray:
+        """(3N,): the resultant's F_z as a functional of the displacement."""
+        return self._wrench_rows[2]
+
     def moment_rows(self) -> np.ndarray:
         """(2, 3N): the resultant's M_x and M_y as functionals of the displacement."""
         return self._wrench_rows[3:5]
@@ -239,6 +243,10 @@ class TractionSolver:
     def support_pressure_rows(self) -> np.ndarray | None:
         """(N, 3N) float32: each cell's constrained-inversion pressure per displacement."""
         return self._support_rows
+
+    def normal_forward(self) -> np.ndarray:
+        """(N, N) float32: u_z of each cell per unit normal force on each (G's zz block)."""
+        return self._g32[2::3, 2::3]
 
     def normal_map_rows(self) -> np.ndarray:
         """(N, 3N) float32: each cell's normal map force (-pressing) per displacement."""

@@ -77,6 +77,9 @@ class WeightParams:
     grows with the indentation's depth (steepest at a contact's edge)."""
     huber_k: float = 2.5
     """Standardised departure beyond which a measurement is down-weighted (Huber's k)."""
+    fit_normal: bool = True
+    """On a pad where most cells are noisy, report the normal displacement the contact's
+    pressure explains (:mod:`.consistent`; ~1 ms a frame there); False: as cleaned."""
 
     def validate(self) -> "WeightParams":
         """Raise ValueError for values outside their ranges (:data:`WEIGHT_SETTINGS`)."""
@@ -89,7 +92,7 @@ WEIGHT_SETTINGS = SettingsTable(
                           "noisy_factor": (1.0, 1e3), "model_error_relative": (0.0, 0.99),
                           "huber_k": (0.5, 100.0)},
     read_only=("enabled", "min_error", "noisy_factor", "model_error", "model_error_relative",
-               "huber_k"))
+               "huber_k", "fit_normal"))
 """The decoder node's ``touch_weights.*`` parameters: read at start (the expected errors
 are a reference's, prepared in the background), so refused live."""
 
