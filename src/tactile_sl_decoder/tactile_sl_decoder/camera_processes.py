@@ -18,8 +18,9 @@ Workers are started with ``spawn`` (a fork of a process with DDS threads is unsa
 about a second to start, end when the pipe closes, and their errors come back as the
 frame's errors.  Before it reports ready, each worker runs two synthetic frames through its
 code (a lattice of ink discs: extraction, patches, classification, the label carry), so that
-the first real frame finds every first-call cost paid; :meth:`CameraProcesses.wait_ready`
-waits for that (a live node, before it subscribes: no frame waits for a starting worker).
+the first real frame finds every first-call cost paid; :meth:`CameraProcesses.poll_ready`
+tells when both are (a live node subscribes to images only then: no frame waits for a
+starting worker), and :meth:`~CameraProcesses.run` waits for it.
 """
 from __future__ import annotations
 
@@ -110,7 +111,7 @@ def _serve(conn: Connection, weights: str | None, threshold: float | None,
     try:
         classifier = Classifier.load(weights, threshold)
         _warm_up(classifier)
-    except Exception as exc:         # reported by the main process (wait_ready)
+    except Exception as exc:         # reported by the main process (poll_ready)
         conn.send(("error", exc))
         return
     carry = LabelCarry(CarryParams())
@@ -228,21 +229,32 @@ class CameraProcesses:
         self._cameras: list[Any] = [None, None]
         self._images: list[SharedMemory | None] = [None, None]
         self._results = [SharedMemory(create=True, size=RESULT_BYTES) for _ in range(2)]
-        self._ready = False
+        self._started = [False, False]     # each worker's "ready" received
 
     def wait_ready(self, timeout: float = 60.0) -> None:
         """Wait until both workers have started and warmed up (RuntimeError if one failed).
 
-        :meth:`run` waits for it too; a live node calls it before it subscribes to images.
+        :meth:`run` waits for it too.
         """
-        if self._ready:
-            return
         deadline = time.monotonic() + timeout
-        for conn, proc in zip(self._conns, self._procs):
+        while not self.poll_ready(max(0.0, deadline - time.monotonic())):
+            if time.monotonic() >= deadline:
+                slow = [p.name for p, up in zip(self._procs, self._started) if not up]
+                raise RuntimeError(f"the {' and '.join(slow)} worker process(es) did not "
+                                   f"start within {timeout:.0f} s")
+
+    def poll_ready(self, timeout: float = 0.0) -> bool:
+        """Whether both workers are ready, waiting at most ``timeout`` s for each answer.
+
+        A live node polls it from a timer and subscribes to images once it is true (it keeps
+        answering its services meanwhile).  RuntimeError if a worker failed to start.
+        """
+        for i, (conn, proc) in enumerate(zip(self._conns, self._procs)):
+            if self._started[i]:
+                continue
             try:
-                if not conn.poll(max(0.0, deadline - time.monotonic())):
-                    raise RuntimeError(f"the {proc.name} worker process did not start within "
-                                       f"{timeout:.0f} s")
+                if not conn.poll(timeout):
+                    continue
                 status, value = conn.recv()
             except (EOFError, OSError):
                 raise RuntimeError(f"the {proc.name} worker process ended while starting "
@@ -250,7 +262,8 @@ class CameraProcesses:
             if status == "error":
                 raise RuntimeError(f"the {proc.name} worker process failed to start: "
                                    f"{value}") from value
-        self._ready = True
+            self._started[i] = True
+        return all(self._started)
 
     def run(self, images: tuple[np.ndarray, np.ndarray], cameras: tuple[Any, Any],
             jobs: tuple[CameraJob, CameraJob]) -> tuple[CameraResult, CameraResult]:

@@ -176,14 +176,14 @@ class StereoPipeline:
             return Glyphs.from_detections(det, gray.shape)
         return self._map(run, left_gray, right_gray)
 
-    def wait_ready(self, timeout: float = 60.0) -> None:
-        """Block until the camera worker processes (if any) have started and warmed up.
+    def ready(self) -> bool:
+        """Whether the camera worker processes (if any) have started and warmed up.
 
-        A live node calls it before subscribing, so that its first frames do not queue (and
-        get dropped) behind a second of worker start-up.  RuntimeError if a worker failed.
+        Never blocks.  A live node subscribes to images only once this is true, so that its
+        first frames do not queue (and get dropped) behind a second of worker start-up.
+        RuntimeError if a worker failed to start.
         """
-        if self._procs is not None:
-            self._procs.wait_ready(timeout)
+        return self._procs is None or self._procs.poll_ready()
 
     def forget_frames(self) -> None:
         """Classify and decode the next frame in full (nothing carried from earlier frames)."""

@@ -53,7 +53,7 @@ def test_the_same_points_cells_and_carry_as_in_process():
 
 
 def test_a_worker_that_cannot_start_is_reported_with_why(tmp_path):
-    """wait_ready (a node calls it before subscribing) names the worker and the reason."""
+    """A worker that cannot start is reported (a node polls before subscribing) with why."""
     from tactile_sl_decoder.camera_processes import CameraProcesses
 
     procs = CameraProcesses(str(tmp_path / "missing.pt"), None)
@@ -72,7 +72,7 @@ def test_workers_report_ready_after_their_warm_up():
     procs = CameraProcesses(None, None)
     try:
         procs.wait_ready(timeout=60.0)
-        assert procs._ready
+        assert procs.poll_ready()
         procs.wait_ready()                       # once is enough: no second handshake
     finally:
         procs.close()

@@ -60,6 +60,10 @@ except ImportError:  # pragma: no cover - interfaces not built
     SymbolArray = None
 
 
+WORKER_START_TIMEOUT = 120.0
+"""Seconds the camera worker processes may take to start before the node gives up."""
+
+
 class DecoderNode(Node):
     """Runs the stereo pipeline on every synchronised stereo frame."""
 
@@ -86,9 +90,6 @@ class DecoderNode(Node):
         if self.input_mode == "images":    # fail at start, not on the first frame
             check_classifier(self.pipeline.load_classifier(), pattern.symbols,
                              s.classifier_weights or "(shipped)")
-            # the camera worker processes start and warm up (~1-2 s) before any image is
-            # subscribed to: the first frames would otherwise queue behind them and be lost
-            self.pipeline.wait_ready()
         sensor = (self.overrides.apply_to(load_sensor(s.sensor_file or None), s.pad_frame)
                   if s.touch else None)
         # the reference is prepared in a worker thread: images keep flowing meanwhile; the
@@ -127,14 +128,18 @@ class DecoderNode(Node):
                 CameraInfo, f"{side}/camera_info",
                 lambda m, s=side: self._on_info(s, m),  # type: ignore[misc]  # s=side
                 inputs)
-            if self.input_mode == "images":
-                self.create_subscription(
-                    Image, f"{side}/image_raw",
-                    lambda m, s=side: self._on_frame(s, m),  # type: ignore[misc]  # s=side
-                    inputs)
-            else:
-                if SymbolArray is None:
-                    raise RuntimeError("tactile_sl_msgs is not built: input=symbols unavailable")
+        if self.input_mode == "images":
+            # Images are subscribed to once the camera worker processes have started and
+            # warmed up (~1-2 s; the node answers its services meanwhile): the first frames
+            # would otherwise queue behind them and be lost.
+            self._inputs_qos = inputs
+            self._starting_since = time.monotonic()
+            self._start_timer = self.create_timer(0.05, self._subscribe_when_ready)
+            self._subscribe_when_ready()
+        else:
+            if SymbolArray is None:
+                raise RuntimeError("tactile_sl_msgs is not built: input=symbols unavailable")
+            for side in ("left", "right"):
                 self.create_subscription(
                     SymbolArray, f"{side}/symbols",
                     lambda m, s=side: self._on_frame(s, m),  # type: ignore[misc]  # s=side
@@ -154,6 +159,26 @@ class DecoderNode(Node):
             f"decoder ready: input={self.input_mode}, pattern {pattern.array.shape[0]}x"
             f"{pattern.array.shape[1]} (window {pattern.window[0]}x{pattern.window[1]}, "
             f"h={pattern.min_hamming}), mirrored={params.decode.mirrored}")
+
+    def _subscribe_when_ready(self) -> None:
+        """Subscribe to both cameras' images once the pipeline's workers are ready."""
+        if self._start_timer.is_canceled():
+            return
+        if not self.pipeline.ready():
+            if time.monotonic() - self._starting_since > WORKER_START_TIMEOUT:
+                raise RuntimeError(f"the camera worker processes did not start within "
+                                   f"{WORKER_START_TIMEOUT:.0f} s")
+            return
+        self._start_timer.cancel()
+        for side in ("left", "right"):
+            self.create_subscription(
+                Image, f"{side}/image_raw",
+                lambda m, s=side: self._on_frame(s, m),  # type: ignore[misc]  # s=side
+                self._inputs_qos)
+        if self.pipeline.params.processes:
+            self.get_logger().info(f"camera worker processes ready after "
+                                   f"{time.monotonic() - self._starting_since:.1f} s: "
+                                   f"subscribed to left/image_raw and right/image_raw")
 
     def destroy_node(self) -> None:
         """Stop the pipeline's worker threads before the node goes."""
