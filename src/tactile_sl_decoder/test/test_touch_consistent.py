@@ -129,13 +129,18 @@ def test_the_stage_reports_the_fitted_normal_displacement_on_a_noisy_pad(monkeyp
     assert normal["fitted"] < 0.8 * normal["measured"]
 
 
-def test_the_fitted_pressure_gives_a_centroid_with_its_variance(solver):
-    rng = np.random.default_rng(21)
-    truth = _displacement(ELASTOMER, [LOAD], 0.0, rng)[:, 2]
-    sigma = _sigma(22)
+def _noisy_fit(solver, load, seed: int, sigma_seed: int):
+    """A random generator, the load's true dz, the cells' noise, a fit with positions."""
+    rng = np.random.default_rng(seed)
+    truth = _displacement(ELASTOMER, [load], 0.0, rng)[:, 2]
+    sigma = _sigma(sigma_seed)
     field = ConsistentField(solver.normal_forward(), sigma, solver.rows, solver.cols, SHAPE,
                             NOMINAL)
-    valid = np.ones(len(ROWS), bool)
+    return rng, truth, sigma, field, np.ones(len(ROWS), bool)
+
+
+def test_the_fitted_pressure_gives_a_centroid_with_its_variance(solver):
+    rng, truth, sigma, field, valid = _noisy_fit(solver, LOAD, 21, 22)
     z, zf = [], []
     for _ in range(20):
         measured = truth + rng.normal(0.0, 1.0, len(ROWS)) * sigma
@@ -192,12 +197,7 @@ def test_a_faint_contact_is_fitted_per_block_of_cells(solver):
     # a wide, faint load under strong noise: its pressure uniform over 2 x 2 cells, a
     # quarter of the unknowns, still explains the field and removes more of the noise
     faint = (0.0, 0.0, -0.05, 3e-3, 0.5e-3, 0.0)
-    rng = np.random.default_rng(31)
-    truth = _displacement(ELASTOMER, [faint], 0.0, rng)[:, 2]
-    sigma = _sigma(32)
-    field = ConsistentField(solver.normal_forward(), sigma, solver.rows, solver.cols, SHAPE,
-                            NOMINAL)
-    valid = np.ones(len(ROWS), bool)
+    rng, truth, sigma, field, valid = _noisy_fit(solver, faint, 31, 32)
     core = _contact(faint)
     errors, forces = [], []
     for _ in range(5):
