@@ -38,32 +38,34 @@ def sample_patches(gray: np.ndarray, u: np.ndarray, v: np.ndarray, step: np.ndar
     n = len(u)
     if n == 0:
         return np.zeros((0, size, size), np.uint8)
-    grid = (np.arange(size, dtype=np.float32) - (size - 1) / 2.0)
-    if np.ndim(step) == 3:
-        map_x, map_y = _affine_maps(u, v, np.asarray(step, np.float32), grid)
-        return _remap(gray, map_x, map_y, size)
-    offsets = grid * np.asarray(step, np.float32)[:, None]  # (n, size)
-    uf = np.ascontiguousarray(u, np.float32)
-    vf = np.ascontiguousarray(v, np.float32)
-    if gray.dtype == np.uint8 and gray.ndim == 2 and gray.size and _kernel_is_exact() \
-            and np.isfinite(offsets).all() and np.isfinite(uf).all() and np.isfinite(vf).all():
-        image = np.ascontiguousarray(gray)
-        return _square_patches(image.reshape(-1), image.shape[0], image.shape[1], uf, vf,
-                               np.ascontiguousarray(offsets)).reshape(n, size, size)
-    # x varies along a patch row, y down a patch column: each map is one small (n, size)
-    # array repeated, as a whole (x) or element by element (y), along the row
-    map_x = np.tile(uf[:, None] + offsets, (1, size))
-    map_y = np.repeat(vf[:, None] + offsets, size, axis=1)
-    return _remap(gray, map_x, map_y, size)
+    if np.ndim(step) != 3 and gray.dtype == np.uint8 and gray.ndim == 2 and gray.size \
+            and _kernel_is_exact():
+        grid = (np.arange(size, dtype=np.float32) - (size - 1) / 2.0)
+        offsets = grid * np.asarray(step, np.float32)[:, None]  # (n, size)
+        uf = np.ascontiguousarray(u, np.float32)
+        vf = np.ascontiguousarray(v, np.float32)
+        if np.isfinite(offsets).all() and np.isfinite(uf).all() and np.isfinite(vf).all():
+            image = np.ascontiguousarray(gray)
+            return _square_patches(image.reshape(-1), image.shape[0], image.shape[1], uf, vf,
+                                   np.ascontiguousarray(offsets)).reshape(n, size, size)
+    return remap_patches(gray, u, v, step, size)
 
 
 def remap_patches(gray: np.ndarray, u: np.ndarray, v: np.ndarray, step: np.ndarray,
                   size: int = PATCH_SIZE) -> np.ndarray:
-    """:func:`sample_patches` through ``cv2.remap`` always (the reference of the kernel)."""
+    """:func:`sample_patches` through ``cv2.remap``: affine patches, the kernel's reference.
+
+    The sampling maps have one row per patch, its samples in row-major order, so that the
+    remapped image already is the (N, size, size) stack.
+    """
+    if len(u) == 0:
+        return np.zeros((0, size, size), np.uint8)
     grid = (np.arange(size, dtype=np.float32) - (size - 1) / 2.0)
     if np.ndim(step) == 3:
         map_x, map_y = _affine_maps(u, v, np.asarray(step, np.float32), grid)
     else:
+        # x varies along a patch row, y down a patch column: each map is one small (n, size)
+        # array repeated, as a whole (x) or element by element (y), along the row
         offsets = grid * np.asarray(step, np.float32)[:, None]
         map_x = np.tile(np.asarray(u, np.float32)[:, None] + offsets, (1, size))
         map_y = np.repeat(np.asarray(v, np.float32)[:, None] + offsets, size, axis=1)
@@ -71,7 +73,7 @@ def remap_patches(gray: np.ndarray, u: np.ndarray, v: np.ndarray, step: np.ndarr
 
 
 def _remap(gray: np.ndarray, map_x: np.ndarray, map_y: np.ndarray, size: int) -> np.ndarray:
-    """One cv2.remap over sampling maps with one row per patch (its samples row-major)."""
+    """cv2.remap over the maps (in chunks of rows OpenCV accepts) into an (N, size, size) stack."""
     n = len(map_x)
     out = np.empty((n, size * size), np.uint8)
     for start in range(0, n, _REMAP_MAX_ROWS):
