@@ -340,9 +340,8 @@ def _cpu_seconds(pipe) -> float:
     counters of /proc/<pid>/stat are too coarse for one frame).
     """
     total = time.process_time()
-    procs = getattr(pipe, "_procs", None)
-    for proc in (procs._procs if procs is not None else []):
-        for task in pathlib.Path(f"/proc/{proc.pid}/task").glob("*/schedstat"):
+    for pid in pipe.worker_pids:
+        for task in pathlib.Path(f"/proc/{pid}/task").glob("*/schedstat"):
             try:
                 total += int(task.read_text().split()[0]) * 1e-9
             except (OSError, ValueError, IndexError):

@@ -243,6 +243,11 @@ class CameraProcesses:
                 raise RuntimeError(f"the {' and '.join(slow)} worker process(es) did not "
                                    f"start within {timeout:.0f} s")
 
+    @property
+    def pids(self) -> list[int]:
+        """The worker processes' ids (left, right)."""
+        return [int(p.pid) for p in self._procs]
+
     def poll_ready(self, timeout: float = 0.0) -> bool:
         """Whether both workers are ready, waiting at most ``timeout`` s for each answer.
 

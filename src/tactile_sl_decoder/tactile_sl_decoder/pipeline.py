@@ -185,6 +185,11 @@ class StereoPipeline:
         """
         return self._procs is None or self._procs.poll_ready()
 
+    @property
+    def worker_pids(self) -> list[int]:
+        """Process ids of the camera worker processes (none in process)."""
+        return self._procs.pids if self._procs is not None else []
+
     def forget_frames(self) -> None:
         """Classify and decode the next frame in full (nothing carried from earlier frames)."""
         self.memory.forget()

@@ -134,7 +134,7 @@ class DecoderNode(Node):
             # would otherwise queue behind them and be lost.
             self._inputs_qos = inputs
             self._starting_since = time.monotonic()
-            self._start_timer = self.create_timer(0.05, self._subscribe_when_ready)
+            self._start_timer: Any = self.create_timer(0.05, self._subscribe_when_ready)
             self._subscribe_when_ready()
         else:
             if SymbolArray is None:
@@ -162,14 +162,15 @@ class DecoderNode(Node):
 
     def _subscribe_when_ready(self) -> None:
         """Subscribe to both cameras' images once the pipeline's workers are ready."""
-        if self._start_timer.is_canceled():
+        if self._start_timer is None:
             return
         if not self.pipeline.ready():
             if time.monotonic() - self._starting_since > WORKER_START_TIMEOUT:
                 raise RuntimeError(f"the camera worker processes did not start within "
                                    f"{WORKER_START_TIMEOUT:.0f} s")
             return
-        self._start_timer.cancel()
+        self.destroy_timer(self._start_timer)
+        self._start_timer = None
         for side in ("left", "right"):
             self.create_subscription(
                 Image, f"{side}/image_raw",
