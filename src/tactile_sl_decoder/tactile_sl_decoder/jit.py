@@ -21,7 +21,9 @@ from numba.extending import intrinsic
 _KERNELS: list[Any] = []
 
 KERNEL_MODULES = ("tactile_sl_decoder.neighbours", "tactile_sl_decoder.extract.spacing",
-                  "tactile_sl_decoder.extract.patches",
+                  "tactile_sl_decoder.extract.patches", "tactile_sl_decoder.extract.centroid",
+                  "tactile_sl_decoder.classify.classifier",
+                  "tactile_sl_decoder.classify.carry",
                   "tactile_sl_decoder.decode.links", "tactile_sl_decoder.decode.votes",
                   "tactile_sl_decoder.stereo.stereo", "tactile_sl_decoder.stereo.outliers",
                   "tactile_sl_decoder.touch.support",

@@ -220,3 +220,71 @@ def test_a_pipeline_refuses_carry_settings_out_of_range():
     params.carry.refresh_frames = 0
     with pytest.raises(ValueError, match="refresh_frames"):
         StereoPipeline(PatternSpec.load(), params=params)
+
+
+def test_normalised_patches_and_correlations_give_the_numpy_bits(frames):
+    """The kernels behind normalised_patches and the correlation are numpy's code bit for
+    bit: real glyph patches of a bag, random, flat and bright ones, other patch sizes."""
+    from tactile_sl_decoder.classify import carry as carry_module
+    from tactile_sl_decoder.extract.extraction import extract_symbols
+
+    assert carry_module._kernels_are_exact()
+    rng = np.random.default_rng(5)
+    real = np.concatenate([extract_symbols(g).patches for f in frames[:6] for g in f[:2]])
+    assert len(real) > 500
+    real.flags.writeable = False                     # a bag's patches may be read-only
+    cases = [real, rng.integers(0, 256, (200, PATCH_SIZE, PATCH_SIZE), dtype=np.uint8),
+             rng.integers(230, 256, (50, PATCH_SIZE, PATCH_SIZE), dtype=np.uint8),
+             np.full((3, PATCH_SIZE, PATCH_SIZE), 128, np.uint8),
+             rng.integers(0, 256, (30, 13, 13), dtype=np.uint8),
+             rng.integers(0, 256, (30, 7, 9), dtype=np.uint8)]
+    for patches in cases:
+        want = carry_module.numpy_normalised_patches(patches)
+        got = carry_module.normalised_patches(patches)
+        assert got.dtype == np.float32 and np.array_equal(got, want), patches.shape
+        ia = rng.integers(0, len(want), 400)
+        ib = np.clip(ia + rng.integers(-2, 3, 400), 0, len(want) - 1)
+        assert np.array_equal(carry_module.correlations(want, ia, want, ib),
+                              np.einsum("ij,ij->i", want[ia], want[ib]))
+    empty = np.zeros(0, np.int64)
+    assert carry_module.correlations(want, empty, want, empty).shape == (0,)
+
+
+def test_normalised_patches_fall_back_to_numpy_where_the_kernels_are_not_exact(monkeypatch):
+    """A failed self-check: numpy's code runs (same results), not the kernels."""
+    from tactile_sl_decoder.classify import carry as carry_module
+
+    def refuse(*args):
+        raise AssertionError("kernel called")
+
+    patches = np.random.default_rng(3).integers(0, 256, (20, PATCH_SIZE, PATCH_SIZE),
+                                                dtype=np.uint8)
+    want = carry_module.numpy_normalised_patches(patches)
+    monkeypatch.setattr(carry_module, "_kernels_are_exact", lambda: False)
+    monkeypatch.setattr(carry_module, "_normalised", refuse)
+    monkeypatch.setattr(carry_module, "_row_dots", refuse)
+    assert np.array_equal(carry_module.normalised_patches(patches), want)
+    idx = np.arange(20)
+    assert np.array_equal(carry_module.correlations(want, idx, want, idx[::-1]),
+                          np.einsum("ij,ij->i", want, want[::-1]))
+    carry = LabelCarry()
+    first = carry.carry(np.arange(20.0) * 20, np.full(20, 30.0), patches, 20.0)
+    carry.remember(first, np.zeros(20, np.uint8), np.ones(20, np.float32))
+    assert carry.carry(np.arange(20.0) * 20, np.full(20, 30.0), patches, 20.0).carried.any()
+
+
+def test_the_carry_self_check_sees_a_wrong_kernel(monkeypatch):
+    """_kernels_are_exact compares bits: a normalisation off by one ulp fails it."""
+    from tactile_sl_decoder.classify import carry as carry_module
+
+    kernel = carry_module._normalised
+
+    def off(patches, crop):
+        out = kernel(patches, crop)
+        out[-1, 0] = np.nextafter(out[-1, 0], np.float32(np.inf))
+        return out
+
+    check = carry_module._kernels_are_exact.__wrapped__
+    assert check()
+    monkeypatch.setattr(carry_module, "_normalised", off)
+    assert not check()

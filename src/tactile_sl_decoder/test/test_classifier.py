@@ -256,3 +256,104 @@ def test_a_garbage_weights_file_gets_no_advice_to_unpickle_it(tmp_path, content,
     assert "weights_only" not in text and "False" not in text, text
     assert "\n" not in text and len(text) < 600, text
     assert "Warning" not in capsys.readouterr().err
+
+
+def _real_patches() -> np.ndarray:
+    """Glyph patches of a few frames of recorded bags (bright and dark scenes)."""
+    from tactile_sl_common.images import to_gray
+    from tactile_sl_decoder.frames import bag_frames
+
+    from ros_harness import REPO
+
+    out = []
+    for name in ("harsh_lighting.mcap", "robust_dark_object.mcap", "sphere_deep_small.mcap"):
+        for i, frame in enumerate(bag_frames(REPO / "bags" / name, camera_info=False)):
+            if i % 5 == 0:
+                out += [extract_symbols(to_gray(frame.left_image)).patches,
+                        extract_symbols(to_gray(frame.right_image)).patches]
+            if i >= 10:
+                break
+    return np.concatenate(out)
+
+
+def test_tiny_kernel_gives_the_numpy_bits():
+    """The kernel path of the default classifier is its numpy code bit for bit: shipped
+    and random weights, real, uniform, bright (sums of squares past 2^24) and flat patches,
+    any batch size (OpenBLAS takes other paths for other sizes)."""
+    from tactile_sl_decoder.classify import classifier as classifier_module
+
+    real = _real_patches()
+    assert len(real) > 1000
+    squares = (real.reshape(len(real), -1).astype(np.int64) ** 2).sum(axis=1)
+    assert (squares > 2 ** 24).any()          # the sums that round in float32 occur
+    rng = np.random.default_rng(7)
+    bright = rng.integers(200, 256, (300, 18, 18), dtype=np.uint8)
+    bright[:3] = np.array([255, 254, 0], np.uint8)[:, None, None]
+    uniform = rng.integers(0, 256, (300, 18, 18), dtype=np.uint8)
+    shipped = Classifier.load().net
+    assert isinstance(shipped, FastTiny)
+    torch.manual_seed(3)
+    other = GlyphNetTiny(3, 8, 16).eval()
+    with torch.no_grad():
+        for p in other.parameters():
+            p.mul_(3.0)
+    random_net = FastTiny.from_state({k: v.numpy() for k, v in other.state_dict().items()})
+    for net in (shipped, random_net):
+        taps = net._taps()
+        assert taps is not None
+        assert classifier_module._tiny_kernel_is_exact(net.s1.shape[0], net.w2.shape[1])
+        for patches in (real, bright, uniform):
+            for n in (2, 3, 17, 100, 129, 300):
+                part = patches[rng.integers(0, len(patches) - n + 1):][:n]
+                assert np.array_equal(net._kernel_logits(part, taps),
+                                      net._numpy_logits(part)), n
+        readonly = real[:600].copy()
+        readonly.flags.writeable = False
+        assert np.array_equal(net.logits(readonly), np.concatenate(
+            [net._numpy_logits(readonly[:512]), net._numpy_logits(readonly[512:])]))
+
+
+def test_tiny_falls_back_to_numpy_where_the_kernel_is_not_exact(monkeypatch):
+    """A failed self-check, one patch (numpy's gemv), a band of another layout or
+    non-uint8 patches: the numpy code runs, not the kernel."""
+    from tactile_sl_decoder.classify import classifier as classifier_module
+
+    net = Classifier.load().net
+    patches = np.random.default_rng(2).integers(0, 256, (40, 18, 18), dtype=np.uint8)
+    want = net._numpy_logits(patches)
+    calls = []
+    kernel = classifier_module._tiny_hidden
+
+    def hidden(*args):
+        calls.append(len(args[0]))
+        return kernel(*args)
+
+    monkeypatch.setattr(classifier_module, "_tiny_hidden", hidden)
+    assert np.array_equal(net.logits(patches), want) and calls == [40]
+    assert np.array_equal(net.logits(patches[:1]), net._numpy_logits(patches[:1]))
+    assert calls == [40]
+    assert np.array_equal(net.logits(patches.astype(np.float32)), want) and calls == [40]
+    monkeypatch.setattr(classifier_module, "_tiny_kernel_is_exact", lambda c, h: False)
+    assert np.array_equal(net.logits(patches), want) and calls == [40]
+    monkeypatch.undo()
+    odd = FastTiny(net.band.copy(), net.s1, net.b1, net.w2, net.b2, net.w3, net.b3)
+    odd.band[0, -1] = 0.5                      # a weight outside the 3x3 band
+    assert odd._taps() is None and net._taps() is not None
+    assert np.array_equal(odd.logits(patches), odd._numpy_logits(patches))
+
+
+def test_the_kernel_self_check_sees_a_wrong_kernel(monkeypatch):
+    """_tiny_kernel_is_exact compares bits: a kernel off by one ulp anywhere fails it."""
+    from tactile_sl_decoder.classify import classifier as classifier_module
+
+    kernel = classifier_module._tiny_hidden
+
+    def off(*args):
+        h = kernel(*args)
+        h[len(h) // 2] = np.nextafter(h[len(h) // 2], np.float32(np.inf))
+        return h
+
+    check = classifier_module._tiny_kernel_is_exact.__wrapped__
+    assert check(16, 32)
+    monkeypatch.setattr(classifier_module, "_tiny_hidden", off)
+    assert not check(16, 32)

@@ -29,6 +29,7 @@ camera; the state is one frame of one camera (:class:`LabelCarry`).
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
@@ -37,6 +38,7 @@ import numpy as np
 from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.glyphs import Glyphs
+from tactile_sl_decoder.jit import helper, kernel
 from tactile_sl_decoder.neighbours import nearest_within
 
 CROP = 3   # pixels left out on each side of a patch for the correlation (the glyph's ring)
@@ -77,6 +79,19 @@ CARRY_SETTINGS = SettingsTable(CarryParams, ranges={
 def normalised_patches(patches: np.ndarray) -> np.ndarray:
     """(N, s, s) uint8 -> (N, (s - 2 CROP)^2) float32, zero mean and unit norm per patch.
 
+    :func:`_normalised` (one GIL-free call instead of some ten numpy calls that hold the
+    GIL between them: the two images' workers run this at once) where it gives
+    :func:`numpy_normalised_patches`'s bits (:func:`_kernels_are_exact`), else that.
+    """
+    if patches.dtype == np.uint8 and patches.ndim == 3 and \
+            min(patches.shape[1:]) > 2 * CROP and _kernels_are_exact():
+        return _normalised(np.ascontiguousarray(patches), CROP)
+    return numpy_normalised_patches(patches)
+
+
+def numpy_normalised_patches(patches: np.ndarray) -> np.ndarray:
+    """:func:`normalised_patches` in numpy, the kernel's reference.
+
     The sums are matrix products (a product with ones, a row-wise dot product): a third of
     ``mean`` / ``linalg.norm``'s time per frame, within 1e-7 of them.
     """
@@ -87,6 +102,125 @@ def normalised_patches(patches: np.ndarray) -> np.ndarray:
     norm = np.sqrt(np.einsum("ij,ij->i", x, x))
     x /= np.maximum(norm, np.float32(1e-6))[:, None]
     return x
+
+
+def correlations(a: np.ndarray, ia: np.ndarray, b: np.ndarray, ib: np.ndarray) -> np.ndarray:
+    """(K,) float32 dot products of rows a[ia] and b[ib] (normalised patches: correlations).
+
+    :func:`_row_dots` where it gives numpy's einsum bits (one GIL-free call, no copies of
+    the rows), else ``np.einsum`` of the rows.  The indices must be in range (the kernel
+    does not check them; the carry's come from matching, they are).
+    """
+    if a.dtype == b.dtype == np.float32 and a.ndim == b.ndim == 2 and \
+            a.shape[1] == b.shape[1] and len(ia) and _kernels_are_exact():
+        return _row_dots(np.ascontiguousarray(a), np.ascontiguousarray(ia, np.int64),
+                         np.ascontiguousarray(b), np.ascontiguousarray(ib, np.int64))
+    return np.einsum("ij,ij->i", a[ia], b[ib])
+
+
+@functools.cache
+def _kernels_are_exact() -> bool:
+    """Whether :func:`_normalised` and :func:`_row_dots` give numpy's bits, once per process.
+
+    numpy's einsum sums a row in an order of its own (its build's SIMD; what
+    :func:`_einsum_dot` reproduces): checked on a fixed sample of random, flat, bright and
+    smooth patches, of the decoder's size and odd ones (tails of the SIMD loop).
+    """
+    rng = np.random.default_rng(20261203)
+    for size, n in ((18, 300), (11, 40), (9, 40), (7, 20)):
+        patches = rng.integers(0, 256, (n, size, size), dtype=np.uint8)
+        patches[:4] = np.array([0, 77, 255, 254], np.uint8)[:, None, None]
+        patches[4:n // 4] = rng.integers(200, 256, (n // 4 - 4, size, size))
+        ramp = np.add.outer(np.arange(size), np.arange(size))
+        patches[n // 4:n // 2] = np.clip(rng.uniform(0, 20, (n // 2 - n // 4, 1, 1)) * ramp
+                                         + rng.uniform(0, 60, (n // 2 - n // 4, 1, 1)), 0, 255)
+        want = numpy_normalised_patches(patches)
+        got = _normalised(patches, CROP)
+        if not np.array_equal(got, want):
+            return False
+        ia = rng.integers(0, n, 2 * n)
+        ib = rng.integers(0, n, 2 * n)
+        ib[:n] = ia[:n]                     # the patch itself: 1 up to rounding
+        if not np.array_equal(_row_dots(want, ia, want, ib),
+                              np.einsum("ij,ij->i", want[ia], want[ib])):
+            return False
+    return True
+
+
+@helper
+def _einsum_dot(a: np.ndarray, b: np.ndarray) -> np.float32:
+    """The dot product of float32 rows a, b as numpy's einsum sums it (x86-64 SSE baseline).
+
+    Four lanes (element k in lane k mod 4), each a chain of unfused multiply-adds over
+    blocks of 16 elements taken last quarter first, then the tail 4 at a time (zeros
+    past the end), then (l0 + l1) + (l2 + l3), added to a 0 output.
+    """
+    zero = np.float32(0.0)
+    l0 = l1 = l2 = l3 = zero
+    count = a.shape[0]
+    k = 0
+    while count - k >= 16:
+        for at in (k + 12, k + 8, k + 4, k):
+            l0 = a[at] * b[at] + l0
+            l1 = a[at + 1] * b[at + 1] + l1
+            l2 = a[at + 2] * b[at + 2] + l2
+            l3 = a[at + 3] * b[at + 3] + l3
+        k += 16
+    while k < count:      # the tail, zero-padded to 4 (0 * 0 leaves a lane, never -0, as it is)
+        l0 = a[k] * b[k] + l0
+        if k + 1 < count:
+            l1 = a[k + 1] * b[k + 1] + l1
+        if k + 2 < count:
+            l2 = a[k + 2] * b[k + 2] + l2
+        if k + 3 < count:
+            l3 = a[k + 3] * b[k + 3] + l3
+        k += 4
+    return zero + ((l0 + l1) + (l2 + l3))
+
+
+_NORMALISED_SIGNATURE = "float32[:, ::1]({patches}, int64)"
+
+
+@kernel([_NORMALISED_SIGNATURE.format(patches="uint8[:, :, ::1]"),
+         _NORMALISED_SIGNATURE.format(patches="Array(uint8, 3, 'C', readonly=True)")])
+def _normalised(patches: np.ndarray, crop: int) -> np.ndarray:
+    """:func:`numpy_normalised_patches` per patch, in numpy's float32 operations and order.
+
+    The mean's sum (integers) is exact in any order; the norm's is numpy einsum's
+    (:func:`_einsum_dot`).
+    """
+    n = patches.shape[0]
+    rows = patches.shape[1] - 2 * crop
+    cols = patches.shape[2] - 2 * crop
+    d = rows * cols
+    out = np.empty((n, d), np.float32)
+    size = np.float32(d)
+    floor = np.float32(1e-6)
+    for i in range(n):
+        x = out[i]
+        total = 0
+        for r in range(rows):
+            line = patches[i, crop + r]
+            for c in range(cols):
+                v = line[crop + c]
+                total += v
+                x[r * cols + c] = np.float32(v)
+        mean = np.float32(total) / size
+        for k in range(d):
+            x[k] = x[k] - mean
+        scale = max(np.sqrt(_einsum_dot(x, x)), floor)
+        for k in range(d):
+            x[k] = x[k] / scale
+    return out
+
+
+@kernel("float32[::1](float32[:, ::1], int64[::1], float32[:, ::1], int64[::1])")
+def _row_dots(a: np.ndarray, ia: np.ndarray, b: np.ndarray, ib: np.ndarray) -> np.ndarray:
+    """(K,) a[ia[k]] . b[ib[k]] as numpy's einsum sums them (:func:`_einsum_dot`)."""
+    out = np.empty(len(ia), np.float32)
+    for k in range(len(ia)):
+        out[k] = _einsum_dot(a[ia[k]], b[ib[k]])
+    return out
 
 
 @dataclass
@@ -160,7 +294,7 @@ class LabelCarry:
         keep = ((prev.label[j] != LABEL_UNKNOWN) & (prev.confidence[j] >= p.min_confidence)
                 & (prev.carried_for[j] + 1 < p.refresh_frames))
         cand, j = cand[keep], j[keep]
-        corr = np.einsum("ij,ij->i", normed[cand], prev.patches[j])
+        corr = correlations(normed, cand, prev.patches, j)
         keep = corr >= p.min_correlation
         cand, j = cand[keep], j[keep]
         out.carried[cand] = True

@@ -28,6 +28,7 @@ can correct the glyph from its neighbours instead of trusting a guess.
 """
 from __future__ import annotations
 
+import functools
 import pickle
 import warnings
 from dataclasses import dataclass, field
@@ -39,6 +40,7 @@ import numpy as np
 
 from tactile_sl_decoder.classify.weights_file import WeightsFileError, read_torch_zip
 from tactile_sl_decoder.contract import LABEL_UNKNOWN, PATCH_SIZE
+from tactile_sl_decoder.jit import fma32, helper, kernel
 
 FORMAT = "tactile_sl_classifier"
 FORMAT_VERSION = 1
@@ -225,6 +227,13 @@ class FastTiny:
     columns likewise, so the ceil-mode 2x2 max-pool is two maxima of contiguous halves; the
     standardisation, bias and ReLU come after it (they commute with max, as in
     :class:`FastLeNet`).
+
+    That is some 25 numpy calls on small arrays, each holding the GIL between them, so the
+    two images' workers stall each other: :meth:`_logits` runs everything up to the hidden
+    layer as one kernel (:func:`_tiny_hidden`, GIL released) that gives the numpy code's
+    bits, and only the last product stays numpy's (OpenBLAS sums it in an order not
+    reproduced).  Where the kernel is not known to be exact (another OpenBLAS / numpy
+    build, a hand-made band, one patch: numpy's gemv) :meth:`_numpy_logits` runs.
     """
 
     band: np.ndarray   # (27, 8 * C): 3 pooled rows x 9 cols -> cols (0,2,4,6,1,3,5,6) x C
@@ -269,6 +278,49 @@ class FastTiny:
         return out
 
     def _logits(self, patches: np.ndarray) -> np.ndarray:
+        """:meth:`_numpy_logits`, through :func:`_tiny_hidden` where that is exact."""
+        taps = self._taps()
+        if len(patches) < 2 or patches.dtype != np.uint8 or taps is None \
+                or not _tiny_kernel_is_exact(self.s1.shape[0], self.w2.shape[1]):
+            return self._numpy_logits(patches)
+        return self._kernel_logits(patches, taps)
+
+    def _kernel_logits(self, patches: np.ndarray, taps: np.ndarray) -> np.ndarray:
+        """The kernel's hidden layer, then numpy's last product (one GIL-free call each)."""
+        x = np.ascontiguousarray(patches).reshape(len(patches), PATCH_SIZE * PATCH_SIZE)
+        h = _tiny_hidden(x, taps, self.s1, self.b1, self.w2, self.b2)
+        out = h @ self.w3
+        out += self.b3
+        return out
+
+    def _taps(self) -> np.ndarray | None:
+        """The (3, 3, C) convolution taps :func:`_tiny_hidden` reads, or None.
+
+        None where the band is not the layout :meth:`from_state` makes (the kernel reads
+        only the 3x3 taps) or the arrays are not of the kernel's types.  Built once per band
+        (the arrays are not modified after loading).
+        """
+        cached = self.__dict__.get("_taps_cache")
+        if cached is not None and cached[0] is self.band:
+            return cached[1]
+        found = None
+        arrays = (self.band, self.s1, self.b1, self.w2, self.b2)
+        channels = self.s1.shape[0]
+        if all(a.dtype == np.float32 and a.flags.c_contiguous for a in arrays) \
+                and self.band.shape == (27, 8 * channels) and self.b1.shape == (channels,) \
+                and self.w2.shape[0] == 16 * channels and self.b2.shape == (self.w2.shape[1],):
+            taps = np.ascontiguousarray(self.band.reshape(3, 9, 8 * channels)[:, 0:3, 0:channels])
+            band = np.zeros((3, 9, 8, channels), np.float32)
+            for slot, c in enumerate(self._ORDER):
+                band[:, c:c + 3, slot, :] = taps
+            if np.array_equal(band.reshape(27, 8 * channels), self.band) and \
+                    not np.signbit(self.band[self.band == 0]).any():
+                found = taps
+        self.__dict__["_taps_cache"] = (self.band, found)
+        return found
+
+    def _numpy_logits(self, patches: np.ndarray) -> np.ndarray:
+        """The reference: numpy, OpenBLAS and OpenCV calls (what the kernel reproduces)."""
         n = patches.shape[0]
         channels = self.s1.shape[0]
         x = np.ascontiguousarray(patches).reshape(n, PATCH_SIZE * PATCH_SIZE).astype(np.float32)
@@ -298,6 +350,206 @@ class FastTiny:
         out = h @ self.w3
         out += self.b3
         return out
+
+
+@functools.cache
+def _tiny_kernel_is_exact(channels: int, hidden: int) -> bool:
+    """Whether :func:`_tiny_hidden` gives :meth:`FastTiny._numpy_logits`'s bits, per shape.
+
+    Checked once per process on a fixed sample (random weights of this shape; uniform,
+    bright, flat and glyph-like patches, so sums of squares above 2^24 that round too) at
+    batch sizes 2..512 that take OpenBLAS's different paths (direct, blocked, threaded).
+    The shipped shape (16 channels, 32 hidden units) is exact with OpenBLAS 0.3.31 on an
+    AVX-512 CPU; some others are not (OpenBLAS sums small products with 24 columns in
+    another order): they run :meth:`FastTiny._numpy_logits`.
+    """
+    rng = np.random.default_rng(20261203)
+    net = FastTiny.from_state({
+        "conv1.weight": rng.standard_normal((channels, 1, 3, 3)).astype(np.float32),
+        "conv1.bias": rng.standard_normal(channels).astype(np.float32),
+        "fc1.weight": (rng.standard_normal((hidden, 16 * channels)) * 0.2).astype(np.float32),
+        "fc1.bias": rng.standard_normal(hidden).astype(np.float32),
+        "out.weight": rng.standard_normal((3, hidden)).astype(np.float32),
+        "out.bias": rng.standard_normal(3).astype(np.float32)})
+    taps = net._taps()
+    if taps is None:
+        return False
+    sizes = (2, 3, 4, 6, 9, 13, 19, 28, 42, 64, 96, 144, 216, 324, 512)
+    patches = _check_sample(rng, sum(sizes))
+    start = 0
+    for n in sizes:
+        part = patches[start:start + n]
+        start += n
+        if not np.array_equal(net._kernel_logits(part, taps), net._numpy_logits(part)):
+            return False
+    return True
+
+
+def _check_sample(rng: np.random.Generator, n: int) -> np.ndarray:
+    """(n, 18, 18) uint8 patches for :func:`_tiny_kernel_is_exact`, shuffled.
+
+    A quarter uniform noise, a quarter bright (200..255: sums of squares past 2^24, where
+    float32 sums round), a few flat, the rest glyph-like: a dark disc, ring or bar on a
+    bright background with noise and a gradient, as the sensor's glyphs are.
+    """
+    out = rng.integers(0, 256, (n, PATCH_SIZE, PATCH_SIZE)).astype(np.float64)
+    quarter = n // 4
+    out[quarter:2 * quarter] = rng.integers(200, 256, (quarter, PATCH_SIZE, PATCH_SIZE))
+    out[2 * quarter:2 * quarter + 4] = np.array([0, 77, 255, 254])[:, None, None]
+    yy, xx = np.mgrid[0:PATCH_SIZE, 0:PATCH_SIZE] - (PATCH_SIZE - 1) / 2.0
+    glyphs = out[2 * quarter + 4:]
+    k = len(glyphs)
+    cx, cy = rng.uniform(-2, 2, (2, k, 1, 1))
+    radius = np.hypot(xx - cx, yy - cy)
+    shape = rng.integers(0, 3, k)[:, None, None]
+    size = rng.uniform(2.5, 6.0, (k, 1, 1))
+    ink = np.where(shape == 0, radius < size, np.where(
+        shape == 1, np.abs(radius - size) < 1.2, (np.abs(yy - cy) < 1.5) & (np.abs(xx) < size)))
+    background = rng.uniform(120, 255, (k, 1, 1)) + rng.uniform(-3, 3, (k, 1, 1)) * xx
+    dark = rng.uniform(0, 90, (k, 1, 1))
+    glyphs[:] = np.where(ink, dark, background) + rng.normal(0, 4, glyphs.shape)
+    return np.clip(np.rint(out[rng.permutation(n)]), 0, 255).astype(np.uint8)
+
+
+_HIDDEN_SIGNATURE = ("float32[:, ::1]({x}, float32[:, :, ::1], float32[::1], float32[::1], "
+                     "float32[:, ::1], float32[::1])")
+
+_KERNEL_BLOCK = 128
+"""Patches :func:`_tiny_hidden` takes at once: its loops run across them (long enough for
+vector instructions) while the block's intermediate arrays stay in cache."""
+
+_FC_STEP = 8
+"""Terms of each fc1 sum added per pass over a block (there are 16 C: a multiple)."""
+
+
+@helper
+def _standardise_pool(x: np.ndarray, start: int, m: int, inv: np.ndarray, shift: np.ndarray,
+                      pooled: np.ndarray) -> None:
+    """Per patch x[start + b]: 1 / (std + 1), mean / (std + 1), 4 x the 2x2 mean pool."""
+    size = np.float32(x.shape[1])
+    zero = np.float32(0.0)
+    for b in range(m):
+        i = start + b
+        total = np.int64(0)
+        squares = np.int64(0)
+        for j in range(x.shape[1]):
+            v = np.int64(x[i, j])
+            total += v
+            squares += v * v
+        mean = np.float32(total) / size
+        var = np.float32(squares) / size - mean * mean
+        inv[b] = np.float32(1.0) / (np.sqrt(max(var, zero)) + np.float32(1.0))
+        shift[b] = mean * inv[b]
+        for r in range(9):
+            for c in range(9):
+                at = 36 * r + 2 * c
+                pooled[9 * r + c, b] = np.float32(
+                    np.int64(x[i, at]) + np.int64(x[i, at + 1]) + np.int64(x[i, at + 18])
+                    + np.int64(x[i, at + 19]))
+
+
+@helper
+def _conv_pool(pooled: np.ndarray, taps: np.ndarray, s1: np.ndarray, b1: np.ndarray,
+               inv: np.ndarray, shift: np.ndarray, m: int, conv: np.ndarray,
+               feats: np.ndarray) -> None:
+    """feats[(row, col, channel), patch]: conv, max-pool, standardisation, bias, ReLU.
+
+    The convolution as OpenBLAS sums a row of the band product: fused multiply-adds from 0,
+    k ascending (row dy, then column dx); the band's zeros are left out (a multiply-add of
+    zero leaves the sum, never -0, as it is).  The ceil-mode 2x2 max-pool takes rows, then
+    columns, as numpy does.
+    """
+    zero = np.float32(0.0)
+    channels = s1.shape[0]
+    for ch in range(channels):
+        t0, t1, t2 = taps[0, 0, ch], taps[0, 1, ch], taps[0, 2, ch]
+        t3, t4, t5 = taps[1, 0, ch], taps[1, 1, ch], taps[1, 2, ch]
+        t6, t7, t8 = taps[2, 0, ch], taps[2, 1, ch], taps[2, 2, ch]
+        for q in range(49):
+            p = 9 * (q // 7) + q % 7
+            for b in range(m):
+                a = fma32(pooled[p, b], t0, zero)
+                a = fma32(pooled[p + 1, b], t1, a)
+                a = fma32(pooled[p + 2, b], t2, a)
+                a = fma32(pooled[p + 9, b], t3, a)
+                a = fma32(pooled[p + 10, b], t4, a)
+                a = fma32(pooled[p + 11, b], t5, a)
+                a = fma32(pooled[p + 18, b], t6, a)
+                a = fma32(pooled[p + 19, b], t7, a)
+                conv[q, b] = fma32(pooled[p + 20, b], t8, a)
+        bias = b1[ch]
+        scale = s1[ch]
+        for pr in range(4):
+            r0, r1 = 14 * pr, 7 * min(2 * pr + 1, 6)
+            for pc in range(4):
+                c0, c1 = 2 * pc, min(2 * pc + 1, 6)
+                row = (4 * pr + pc) * channels + ch
+                for b in range(m):
+                    left = max(conv[r0 + c0, b], conv[r1 + c0, b])
+                    right = max(conv[r0 + c1, b], conv[r1 + c1, b])
+                    v = max(left, right) * inv[b] + (bias - shift[b] * scale)
+                    feats[row, b] = v if v > zero else zero
+
+
+@helper
+def _dense(feats: np.ndarray, w2: np.ndarray, b2: np.ndarray, m: int, acc: np.ndarray,
+           out: np.ndarray) -> None:
+    """out[b] = relu(feats[:, b] @ w2 + b2) as OpenBLAS sums it (k ascending, from 0)."""
+    zero = np.float32(0.0)
+    for j in range(w2.shape[1]):
+        for b in range(m):
+            acc[j, b] = zero
+        for k in range(0, w2.shape[0], _FC_STEP):
+            v0, v1, v2, v3 = w2[k, j], w2[k + 1, j], w2[k + 2, j], w2[k + 3, j]
+            v4, v5, v6, v7 = w2[k + 4, j], w2[k + 5, j], w2[k + 6, j], w2[k + 7, j]
+            for b in range(m):
+                a = fma32(feats[k, b], v0, acc[j, b])
+                a = fma32(feats[k + 1, b], v1, a)
+                a = fma32(feats[k + 2, b], v2, a)
+                a = fma32(feats[k + 3, b], v3, a)
+                a = fma32(feats[k + 4, b], v4, a)
+                a = fma32(feats[k + 5, b], v5, a)
+                a = fma32(feats[k + 6, b], v6, a)
+                acc[j, b] = fma32(feats[k + 7, b], v7, a)
+        bias = b2[j]
+        for b in range(m):
+            v = acc[j, b] + bias
+            out[b, j] = v if v > zero else zero
+
+
+@kernel([_HIDDEN_SIGNATURE.format(x="uint8[:, ::1]"),
+         _HIDDEN_SIGNATURE.format(x="Array(uint8, 2, 'C', readonly=True)")])
+def _tiny_hidden(x: np.ndarray, taps: np.ndarray, s1: np.ndarray, b1: np.ndarray,
+                 w2: np.ndarray, b2: np.ndarray) -> np.ndarray:
+    """(N, hidden) ReLU'd hidden layer of :class:`FastTiny` for (N, 324) uint8 patches.
+
+    :meth:`FastTiny._numpy_logits`'s arithmetic in its order, in blocks of
+    :data:`_KERNEL_BLOCK` patches (the innermost loops run across a block's patches, so
+    they become vector instructions).  The integer sums (mean, 2x2 area pool) are exact in
+    any order; numpy einsum's sum of squares is exact up to its one rounding at the end
+    (four lanes of at most 81 squares, then their total: float32(total) rounds alike);
+    each matrix product is OpenBLAS sgemm's sequence of fused multiply-adds from 0, k
+    ascending.  ``taps`` (3, 3, C) is the band's 3x3 kernels (0.25 x conv1).
+    """
+    n = x.shape[0]
+    channels = s1.shape[0]
+    hidden = w2.shape[1]
+    out = np.empty((n, hidden), np.float32)
+    if n == 0:
+        return out
+    block = min(n, _KERNEL_BLOCK)
+    pooled = np.empty((81, block), np.float32)
+    inv = np.empty(block, np.float32)
+    shift = np.empty(block, np.float32)
+    conv = np.empty((49, block), np.float32)
+    feats = np.empty((16 * channels, block), np.float32)
+    acc = np.empty((hidden, block), np.float32)
+    for start in range(0, n, block):
+        m = min(block, n - start)
+        _standardise_pool(x, start, m, inv, shift, pooled)
+        _conv_pool(pooled, taps, s1, b1, inv, shift, m, conv, feats)
+        _dense(feats, w2, b2, m, acc, out[start:start + m])
+    return out
 
 
 @dataclass

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from tactile_sl_decoder.extract.patches import sample_patches
+from tactile_sl_decoder.jit import fma32, kernel
 
 _MOMENT_BLOCK = 256  # patches per product in patch_centroid_offset
 CLOSING_SPACINGS = 0.75
@@ -70,18 +71,35 @@ def patch_centroid_offset(patches: np.ndarray, dark: bool = True, radius: float 
     flat = np.ascontiguousarray(patches.reshape(n, size * size))
     kernels = _centroid_kernels(size, radius)
     if flatten:
-        thresh = _threshold_planes(flat, size, level, tolerance, background, background_step)
+        if _planes_kernel_is_exact():
+            ring, _, basis = _border_plane(size)
+            thresh, misfit, mean = _plane_thresholds(
+                flat, ring, _border_products(size), basis, np.float32(level),
+                np.float32(1.0 - level), np.float32(tolerance))
+            if background is not None and misfit.any():
+                _background_thresholds(thresh, misfit, mean, background, level,
+                                       background_step)
+        else:
+            thresh = _threshold_planes(flat, size, level, tolerance, background,
+                                       background_step)
     else:
         # the (rounded) patch mean, repeated over the patch
         thresh = np.repeat(cv2.reduce(flat, 1, cv2.REDUCE_AVG, dtype=cv2.CV_8U), size * size,
                            axis=1)
+    doubled = _doubled_kernels(size, radius)
+    if doubled is None:
+        return _grey_moments_reference(flat, thresh, kernels, dark)
+    return _grey_moments(flat, thresh, doubled, bool(dark))
+
+
+def _grey_moments_reference(flat: np.ndarray, thresh: np.ndarray, kernels: np.ndarray,
+                            dark: bool) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_grey_moments` in numpy (its tests' reference): weights, thin products."""
+    n = len(flat)
     # uint8 arithmetic: the saturating difference is exactly max(threshold - grey, 0) (or
     # max(grey - threshold, 0)), at a quarter of the memory traffic
     weight = cv2.subtract(thresh, flat) if dark else cv2.subtract(flat, thresh)
     weight = weight.astype(np.float32)
-    # thin products (rows, 324) x (324, 3), in blocks small enough (m*n*k < 2^18) that
-    # OpenBLAS keeps each on the calling thread whatever its thread count: on a busy machine
-    # BLAS worker threads spin and stall (cv2.gemm also stays on this thread, but is slower)
     moments = np.empty((n, 3), np.float32)
     for first in range(0, n, _MOMENT_BLOCK):
         np.matmul(weight[first:first + _MOMENT_BLOCK], kernels,
@@ -90,10 +108,153 @@ def patch_centroid_offset(patches: np.ndarray, dark: bool = True, radius: float 
     return moments[:, 1] / total, moments[:, 2] / total
 
 
+@kernel("Tuple((float32[::1], float32[::1]))(uint8[:, ::1], uint8[:, ::1], int32[:, ::1], "
+        "boolean)")
+def _grey_moments(flat: np.ndarray, thresh: np.ndarray, doubled: np.ndarray, dark: bool
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Grey-weighted centroid (du, dv) of each patch, one pass per patch.
+
+    Weights are max(threshold - grey, 0) (``dark``; else max(grey - threshold, 0)) times the
+    disc kernels.
+
+    ``doubled`` is (3, pixels): twice the disc kernels, integers (:func:`_doubled_kernels`).
+    The moments are sums of integers below 2^24, exact in int32 and in float32 alike, so
+    they are summed as integers (in any order, vectorised) and give the float32 matrix
+    product's bits.
+    """
+    n, pixels = flat.shape
+    du = np.empty(n, np.float32)
+    dv = np.empty(n, np.float32)
+    floor = np.float32(1e-6)
+    half = np.float32(0.5)
+    for i in range(n):
+        m0 = 0
+        m1 = 0
+        m2 = 0
+        for p in range(pixels):
+            if dark:
+                w = max(np.int32(thresh[i, p]) - np.int32(flat[i, p]), 0)
+            else:
+                w = max(np.int32(flat[i, p]) - np.int32(thresh[i, p]), 0)
+            m0 += w * doubled[0, p]
+            m1 += w * doubled[1, p]
+            m2 += w * doubled[2, p]
+        total = max(np.float32(m0) * half, floor)
+        du[i] = np.float32(m1) * half / total
+        dv[i] = np.float32(m2) * half / total
+    return du, dv
+
+
+@functools.lru_cache(maxsize=8)
+def _doubled_kernels(size: int, radius: float) -> np.ndarray | None:
+    """(3, size*size) int32: twice :func:`_centroid_kernels`, or None where not exact.
+
+    Pixel coordinates from the patch centre are whole or half numbers; None where a patch's
+    moments could leave float32's exact integers (a large patch), so that
+    :func:`_grey_moments` would not give the matrix product's bits.
+    """
+    doubled = 2.0 * _centroid_kernels(size, radius).T.astype(np.float64)
+    if not np.array_equal(doubled, np.round(doubled)) or \
+            255.0 * np.abs(doubled).sum(axis=1).max() >= 2.0 ** 24:
+        return None
+    return np.ascontiguousarray(doubled, np.int32)
+
+
+@kernel("Tuple((uint8[:, ::1], boolean[::1], float32[::1]))(uint8[:, ::1], int64[::1], "
+        "float32[:, ::1], float32[:, ::1], float32, float32, float32)")
+def _plane_thresholds(flat: np.ndarray, ring: np.ndarray, both: np.ndarray, basis: np.ndarray,
+                      level: np.float32, rest: np.float32, tolerance: np.float32
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_threshold_planes` without the background step: thresholds, misfit, mean.
+
+    The same float32 operations in the same order: OpenBLAS's thin products here are
+    sequential fused multiply-adds over the inner index, ``cv2.reduce``'s average the exact
+    integer sum times float32(1 / pixels), ``convertScaleAbs`` a rounding half to even with
+    saturation (``rest`` is float32(1 - level)).
+    """
+    n, pixels = flat.shape
+    r = len(ring)
+    thresh = np.empty((n, pixels), np.uint8)
+    misfit = np.empty(n, np.bool_)
+    mean = np.empty(n, np.float32)
+    inv_pixels = np.float32(1.0 / pixels)
+    count = np.float32(r)
+    one = np.float32(1.0)
+    zero = np.float32(0.0)
+    for i in range(n):
+        c0 = zero
+        c1 = zero
+        c2 = zero
+        a0 = zero
+        a1 = zero
+        a2 = zero
+        squares = 0
+        for t in range(r):
+            g = int(flat[i, ring[t]])
+            squares += g * g                       # integers below 2^24: exact in float32
+            b = np.float32(g)
+            c0 = fma32(b, both[t, 0], c0)
+            c1 = fma32(b, both[t, 1], c1)
+            c2 = fma32(b, both[t, 2], c2)
+            a0 = fma32(b, both[t, 3], a0)
+            a1 = fma32(b, both[t, 4], a1)
+            a2 = fma32(b, both[t, 5], a2)
+        dot = zero
+        dot += a0 * c0
+        dot += a1 * c1
+        dot += a2 * c2
+        resid = np.float32(squares) - dot
+        bound = tolerance * c0
+        bad = resid > bound * bound * count
+        total = 0
+        for p in range(pixels):
+            total += int(flat[i, p])               # integers below 2^24: exact in float32
+        m = np.float32(total) * inv_pixels
+        start = m if bad else rest * m + level * c0
+        scale = start / max(c0, one)
+        k0 = c0 * scale
+        k1 = zero if bad else c1 * scale
+        k2 = zero if bad else c2 * scale
+        for p in range(pixels):
+            x = fma32(k2, basis[2, p], fma32(k1, basis[1, p], fma32(k0, basis[0, p], zero)))
+            x = np.rint(abs(x))
+            thresh[i, p] = np.uint8(255.0 if x > 255.0 else x)
+        misfit[i] = bad
+        mean[i] = m
+    return thresh, misfit, mean
+
+
+@functools.cache
+def _planes_kernel_is_exact() -> bool:
+    """Whether :func:`_plane_thresholds` gives :func:`_threshold_planes`' bytes here.
+
+    Once per process (BLAS and OpenCV builds differ), on random patches of several batch
+    sizes, smooth and noisy, two patch sizes.
+    """
+    rng = np.random.default_rng(20261204)
+    for size, n in ((18, 300), (18, 7), (18, 1), (12, 64)):
+        g = np.arange(size, dtype=np.float32) - (size - 1) / 2.0
+        ramp = (rng.uniform(-6, 6, (n, 1, 1)) * g[None, :, None]
+                + rng.uniform(-6, 6, (n, 1, 1)) * g[None, None, :])
+        base = rng.uniform(20, 235, (n, 1, 1)) + ramp
+        noisy = rng.normal(0.0, rng.uniform(0, 40, (n, 1, 1)), (n, size, size))
+        flat = np.clip(base + noisy, 0, 255).astype(np.uint8).reshape(n, size * size)
+        ring, _, basis = _border_plane(size)
+        for level, tolerance in ((0.5, 0.15), (0.2, 0.05)):
+            mine = _plane_thresholds(flat, ring, _border_products(size), basis,
+                                     np.float32(level), np.float32(1.0 - level),
+                                     np.float32(tolerance))[0]
+            if not np.array_equal(mine, _threshold_planes(flat, size, level, tolerance)):
+                return False
+    return True
+
+
 def _threshold_planes(flat: np.ndarray, size: int, level: float, tolerance: float,
                       background: BackgroundPatches | None = None,
                       background_step: float = 0.5) -> np.ndarray:
     """(n, size*size) uint8 thresholds of :func:`patch_centroid_offset` with ``flatten``.
+
+    In numpy: the reference of :func:`_plane_thresholds`, and its fallback.
 
     Per patch the least-squares plane a + b x + c y through the border pixels and its
     residual (||r||^2 = ||v||^2 - (A^T v) . coef for the least-squares coef of values v,
@@ -124,16 +285,26 @@ def _threshold_planes(flat: np.ndarray, size: int, level: float, tolerance: floa
         thresh[first:first + _MOMENT_BLOCK] = cv2.convertScaleAbs(
             coef[first:first + _MOMENT_BLOCK] @ basis)
     if background is not None and misfit.any():
-        idx = np.flatnonzero(misfit)
-        back = background(idx).reshape(len(idx), -1).astype(np.float32)
-        back_mean = np.maximum(back.mean(axis=1), 1.0)
-        stepped = (back.max(axis=1) - back.min(axis=1)) / back_mean > background_step
-        if stepped.any():
-            idx, back = idx[stepped], back[stepped]
-            # the same start level as the plane's: (1 - level) mean + level background
-            scale = (1.0 - level) * mean[idx] / back_mean[stepped] + level
-            thresh[idx] = np.clip(back * scale[:, None] + 0.5, 0, 255).astype(np.uint8)
+        _background_thresholds(thresh, misfit, mean, background, level, background_step)
     return thresh
+
+
+def _background_thresholds(thresh: np.ndarray, misfit: np.ndarray, mean: np.ndarray,
+                           background: BackgroundPatches, level: float,
+                           background_step: float) -> None:
+    """Misfit patches whose background steps across them take their thresholds from it.
+
+    In place; see :func:`patch_centroid_offset`.
+    """
+    idx = np.flatnonzero(misfit)
+    back = background(idx).reshape(len(idx), -1).astype(np.float32)
+    back_mean = np.maximum(back.mean(axis=1), 1.0)
+    stepped = (back.max(axis=1) - back.min(axis=1)) / back_mean > background_step
+    if stepped.any():
+        idx, back = idx[stepped], back[stepped]
+        # the same start level as the plane's: (1 - level) mean + level background
+        scale = (1.0 - level) * mean[idx] / back_mean[stepped] + level
+        thresh[idx] = np.clip(back * scale[:, None] + 0.5, 0, 255).astype(np.uint8)
 
 
 def closing_background(gray: np.ndarray, u: np.ndarray, v: np.ndarray, step: np.ndarray,
