@@ -418,10 +418,6 @@ _KERNEL_BLOCK = 128
 """Patches :func:`_tiny_hidden` takes at once: its loops run across them (long enough for
 vector instructions) while the block's intermediate arrays stay in cache."""
 
-_FC_STEP = 8
-"""Terms of each fc1 sum added per pass over a block (there are 16 C: a multiple)."""
-
-
 @helper
 def _standardise_pool(x: np.ndarray, start: int, m: int, inv: np.ndarray, shift: np.ndarray,
                       pooled: np.ndarray) -> None:
@@ -499,18 +495,10 @@ def _dense(feats: np.ndarray, w2: np.ndarray, b2: np.ndarray, m: int, acc: np.nd
     for j in range(w2.shape[1]):
         for b in range(m):
             acc[j, b] = zero
-        for k in range(0, w2.shape[0], _FC_STEP):
-            v0, v1, v2, v3 = w2[k, j], w2[k + 1, j], w2[k + 2, j], w2[k + 3, j]
-            v4, v5, v6, v7 = w2[k + 4, j], w2[k + 5, j], w2[k + 6, j], w2[k + 7, j]
+        for k in range(w2.shape[0]):
+            weight = w2[k, j]
             for b in range(m):
-                a = fma32(feats[k, b], v0, acc[j, b])
-                a = fma32(feats[k + 1, b], v1, a)
-                a = fma32(feats[k + 2, b], v2, a)
-                a = fma32(feats[k + 3, b], v3, a)
-                a = fma32(feats[k + 4, b], v4, a)
-                a = fma32(feats[k + 5, b], v5, a)
-                a = fma32(feats[k + 6, b], v6, a)
-                acc[j, b] = fma32(feats[k + 7, b], v7, a)
+                acc[j, b] = fma32(feats[k, b], weight, acc[j, b])
         bias = b2[j]
         for b in range(m):
             v = acc[j, b] + bias
