@@ -9,9 +9,9 @@
 In-process: median milliseconds per stereo pair with the per-stage breakdown (check,
 extraction, classification, lattice + decoding, stereo), over every frame of the bags,
 and the end-to-end accuracy table (coverage, wrong cells, 3-D error against ground truth).
-With --threads 2 (the default) each image runs in its own worker thread: extract,
-knn (the lattice's k-NN search + rectification of the glyph centres) and classify are then
-the slower worker's times, which overlap; "workers" is the wall time of that part.
+With --threads 2 (the default) each image runs in its own worker thread: extract, lattice
+(k-NN search and neighbourhood of the glyphs + rectification of their centres) and classify
+are then the slower worker's times, which overlap; "workers" is the wall time of that part.
 With --processes each image's worker is a process of its own, as in the live decoder node
 (no interpreter lock shared between the two images; the images go through shared memory
 and the glyphs come back pickled), and cpu+touch counts the workers' CPU time too.
@@ -217,7 +217,7 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
     pipes = {m: _pipeline(args, carry=m == "on") for m in modes}
     first = pipes[modes[0]]
     floors = {"serial": Floor(first, parallel=False), "parallel": Floor(first, parallel=True)}
-    stages = ("check", "extract", "knn", "classify", "workers", "decode", "stereo", "total")
+    stages = ("check", "extract", "lattice", "classify", "workers", "decode", "stereo", "total")
     rows = list(stages) + (["touch", "slip", "total+touch", "cpu+touch"] if args.touch
                            else [])
     timings: dict[str, dict[str, list[float]]] = {m: {s: [] for s in rows} for m in modes}

@@ -40,7 +40,7 @@ from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry, label_gly
 from tactile_sl_decoder.classify.classifier import Classifier
 from tactile_sl_decoder.cpu_threads import set_cpu_threads
 from tactile_sl_decoder.decode.grid import GridParams
-from tactile_sl_decoder.decode.joint import glyph_neighbours
+from tactile_sl_decoder.decode.joint import image_lattice
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.stereo.stereo import StereoRig
@@ -77,7 +77,7 @@ class CameraResult:
     """One camera's half of a frame, as a worker made it.
 
     Its glyphs (labelled), how many kept a label, their match to the previous frame
-    (``LabelCarry.last``) and the extraction / k-NN / classification times.
+    (``LabelCarry.last``) and the extraction / lattice / classification times.
     """
 
     glyphs: Glyphs
@@ -184,14 +184,14 @@ def _half(image: np.ndarray, job: CameraJob, camera: Any, classifier: Classifier
           carry: LabelCarry) -> CameraResult:
     # ``image`` lies in shared memory the main process rewrites for the next frame: nothing
     # computed here keeps a view of it (extraction copies what it keeps)
-    """Extract, find the k nearest neighbours, rectify, classify (the in-process worker's)."""
+    """Extract, build the lattice, rectify, classify (the in-process worker's)."""
     if job.threshold is not None:
         classifier.threshold = job.threshold
     gray = image
     t0 = time.perf_counter()
     g = Glyphs.from_detections(extract_symbols(gray, job.extraction), gray.shape)
     t1 = time.perf_counter()
-    g.neighbours = glyph_neighbours(g, job.grid)
+    g.lattice = image_lattice(g, job.grid)
     g.rectified = StereoRig.rectify(camera, np.column_stack([g.u, g.v]).astype(np.float64))
     t2 = time.perf_counter()
     match = None

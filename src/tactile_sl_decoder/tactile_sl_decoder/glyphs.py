@@ -45,9 +45,10 @@ class Glyphs:
     patches: np.ndarray | None = None
     row: np.ndarray = field(default_factory=_not_carried)
     col: np.ndarray = field(default_factory=_not_carried)
-    neighbours: tuple[np.ndarray, np.ndarray] | None = None
-    """k-NN table of (u, v) (:func:`~tactile_sl_decoder.decode.grid.nearest_neighbours`), if the
-    pipeline computed it already (in a worker thread); else decoding computes it."""
+    lattice: Any = None
+    """The glyphs' lattice (a :class:`~tactile_sl_decoder.decode.grid.Grid`,
+    :func:`~tactile_sl_decoder.decode.joint.image_lattice`), if the pipeline built it already
+    (in a worker thread); else decoding builds it."""
     rectified: np.ndarray | None = None
     """(N, 2) undistorted + rectified pixels of (u, v), if a worker computed them already."""
 

@@ -34,7 +34,7 @@ from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
 from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
 from tactile_sl_decoder.decode.grid import GridParams
-from tactile_sl_decoder.decode.joint import decode_jointly, glyph_neighbours
+from tactile_sl_decoder.decode.joint import decode_jointly, image_lattice
 from tactile_sl_decoder.decode.track import StreamMemory
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
@@ -198,19 +198,20 @@ class StereoPipeline:
 
     def _extract_classify(self, job: tuple[np.ndarray, Any, LabelCarry | None]
                           ) -> tuple[Glyphs, int, float, float, float]:
-        """One image's share of a worker: extract, find neighbours, rectify, classify.
+        """One image's share of a worker: extract, build the lattice, rectify, classify.
 
         ``job`` is (grey image, its CameraCalibration, its camera's LabelCarry or None).  The
-        k-NN table and the rectified pixels of the glyph centres are kept with the glyphs
-        for decoding and stereo.  Returns the glyphs, how many kept the previous frame's
-        label, and the extraction, k-NN (+ rectification) and classification milliseconds.
+        lattice and the rectified pixels of the glyph centres are kept with the glyphs for
+        decoding and stereo.  Returns the glyphs, how many kept the previous frame's label,
+        and the extraction, lattice (k-NN + neighbourhood, + rectification) and
+        classification milliseconds.
         """
         gray, cam, carry = job
         t0 = time.perf_counter()
         det = self._extract(gray)
         g = Glyphs.from_detections(det, gray.shape)
         t1 = time.perf_counter()
-        g.neighbours = glyph_neighbours(g, self.params.grid)
+        g.lattice = image_lattice(g, self.params.grid)
         g.rectified = StereoRig.rectify(cam, np.column_stack([g.u, g.v]).astype(np.float64))
         t2 = time.perf_counter()
         carried = label_glyphs([g], [carry], self._predict)
@@ -277,9 +278,9 @@ class StereoPipeline:
             t2 = time.perf_counter()
             carried = self.classify_pair(left, right, self.memory.label_carries())
         else:
-            # One worker per image: extraction, the lattice's k-NN search and classification
-            # of that image (OpenCV, the k-d tree and the classifier's matrix products
-            # release the GIL).  The stage times are then the slower worker's (overlapping).
+            # One worker per image: extraction, the lattice and classification of that image
+            # (OpenCV, the compiled kernels and the classifier's matrix products release the
+            # GIL).  The stage times are then the slower worker's (overlapping).
             self.load_classifier()
             carry_l, carry_r = self.memory.label_carries()
             (left, carried_l, *ms_l), (right, carried_r, *ms_r) = self._map(
@@ -298,7 +299,7 @@ class StereoPipeline:
                                      classify=1e3 * (t3 - t2))
         else:
             result.timings_ms.update(check=1e3 * (t1 - t0), extract=worker_ms[0],
-                                     knn=worker_ms[1], classify=worker_ms[2],
+                                     lattice=worker_ms[1], classify=worker_ms[2],
                                      workers=1e3 * (t3 - t1))
         result.timings_ms["total"] = 1e3 * (time.perf_counter() - t0)
         return result

@@ -113,11 +113,12 @@ def test_views_tilted_40_deg_decode_most_visible_cells(scene, axis):
                                                               target.pitch_m, cam)
             assert visible > 600
             shares[tilted, cam] = right_cells / visible
-            if tilted:
-                assert wrong == 0
+            assert wrong == 0
     assert min(shares[True, 0], shares[True, 1]) >= 0.8, shares
-    # the sensor pipeline's settings decode far fewer of them (what this handling adds)
-    assert max(shares[False, 0], shares[False, 1]) < 0.6, shares
+    # the sensor pipeline's settings lose most of at least one camera's view (what this
+    # handling adds; each camera's lattice has its own spacing, so the less foreshortened
+    # view of a tilt about y may decode with them too)
+    assert min(shares[False, 0], shares[False, 1]) < 0.6, shares
 
 
 @pytest.mark.slow

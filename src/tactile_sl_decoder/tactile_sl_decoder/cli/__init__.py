@@ -106,7 +106,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not getattr(args, "func", None):
                 parser.print_help()
                 return 0 if args.command is None else 2
-            return int(args.func(args) or 0)
+            try:
+                return int(args.func(args) or 0)
+            except SystemError as exc:
+                # a signal that came as a compiled kernel (numba) returned: CPython reports
+                # its handler's exception as the cause of a SystemError ("returned a result
+                # with an exception set")
+                if isinstance(exc.__cause__, KeyboardInterrupt):
+                    raise exc.__cause__ from None
+                raise
     except Terminated:
         print("terminated", file=sys.stderr)
         return 128 + signal.SIGTERM

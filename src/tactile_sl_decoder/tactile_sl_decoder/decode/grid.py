@@ -70,6 +70,9 @@ class Grid:
     row_vec: np.ndarray    # (N, 2) float64
     spacing_px: float
     pts: np.ndarray | None = None   # (N, 2) glyph centres (u, v), pixels
+    nearest: np.ndarray | None = None
+    """(N,) distance to each glyph's nearest glyph (px, inf: none within the search's gate);
+    ``spacing_px`` is its median, and grids joined side by side take the joint median."""
 
     def neighbour(self, dr: int, dc: int) -> np.ndarray:
         """Index array (N,) of the neighbour at (dr, dc) in {-1, 0, 1}^2, -1 where missing."""
@@ -80,7 +83,7 @@ def _empty(n: int, pts: np.ndarray | None = None) -> Grid:
     nbr = np.full((n, 9), -1, dtype=np.int64)
     nbr[:, CENTRE] = np.arange(n)
     return Grid(nbr, np.zeros((n, 2)), np.zeros((n, 2)), 0.0,
-                np.zeros((n, 2)) if pts is None else pts)
+                np.zeros((n, 2)) if pts is None else pts, np.full(n, np.inf))
 
 
 def _global_frame(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, spacing: float
@@ -189,7 +192,7 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
         int(p.smooth_iterations))
     col_vec, row_vec = both[:, :2], both[:, 2:]
     nbr = _assign(du, dv, idx, valid, col_vec, row_vec, p)
-    return Grid(nbr, col_vec, row_vec, spacing, pts)
+    return Grid(nbr, col_vec, row_vec, spacing, pts, np.where(valid[:, 0], nn, np.inf))
 
 
 def _per_glyph(gate: float | np.ndarray, n: int) -> np.ndarray:
