@@ -13,12 +13,11 @@ from tactile_sl_decoder.decode.grid import (
     NEIGHBOUR_SLOTS,
     OFFSETS,
     GridParams,
-    _global_frame,
     _local_spacings,
     _per_glyph,
     nearest_neighbours,
 )
-from tactile_sl_decoder.decode.links import lattice_vectors, neighbour_table
+from tactile_sl_decoder.decode.links import lattice_setup, lattice_vectors, neighbour_table
 
 # ---- the numpy version of build_grid's step 3 (links.lattice_vectors' reference), verbatim
 
@@ -245,6 +244,17 @@ def _lattice(seed, shear, stretch, drop, strays, oblique=False):
     return pts[:, 0], pts[:, 1]
 
 
+def _global_frame(du, dv, dist, spacing):
+    """Unit column direction from short displacements: the trigonometric version that
+    links.lattice_setup replaced (its reference to within rounding)."""
+    short = (dist > 0.5 * spacing) & (dist < 1.25 * spacing)
+    if not short.any():
+        return np.array([1.0, 0.0])
+    theta = np.arctan2(dv[short], du[short])
+    phi = np.angle(np.exp(4j * theta).sum()) / 4.0   # in (-45, 45] degrees: closest to +u
+    return np.array([np.cos(phi), np.sin(phi)])
+
+
 def _candidates(u, v, p, hint):
     """build_grid's steps 1-2: k-NN, displacements, spacing and the global frame."""
     dist, idx = nearest_neighbours(u, v, p.k_neighbours, hint)
@@ -326,3 +336,31 @@ def test_lattice_vectors_kernel_equals_the_numpy_steps(seed, shear, stretch, dro
         np.broadcast_to(row_dir * fallback, (n, 2)).copy(), smooth)
     assert np.array_equal(got_nbr4, want_nbr4) and (got_nbr4 >= 0).mean() > 0.5
     np.testing.assert_array_equal(got_vec, want_vec)
+
+
+@pytest.mark.parametrize("seed,shear,stretch,drop,strays,oblique", [
+    (0, 0.0, 1.0, 0.0, 0, False), (1, 0.15, 1.2, 0.1, 30, False),
+    (2, -0.3, 0.8, 0.3, 80, False), (3, 0.0, 1.0, 0.05, 10, True)])
+def test_lattice_setup_equals_the_numpy_steps(seed, shear, stretch, drop, strays, oblique):
+    """Displacements, validity and spacing bit for bit; the orientation (products instead
+    of trigonometry) to rounding."""
+    u, v = _lattice(seed, shear, stretch, drop, strays, oblique)
+    p = GridParams()
+    dist, idx, valid, du, dv, spacing, col_dir, _row = _candidates(u, v, p, 18.0)
+    raw = nearest_neighbours(u, v, p.k_neighbours, 18.0)
+    got = lattice_setup(np.ascontiguousarray(u, np.float64), np.ascontiguousarray(v, np.float64),
+                        np.ascontiguousarray(raw[0]), np.ascontiguousarray(raw[1], np.int64), 1)
+    for mine, ref in zip(got[:4], (du, dv, valid, idx)):
+        np.testing.assert_array_equal(mine, ref)
+    assert got[4] == spacing
+    np.testing.assert_allclose(got[5], col_dir, rtol=0, atol=1e-12)
+    # every other glyph (the subsample of large images) and a table with no short step
+    half = lattice_setup(np.ascontiguousarray(u, np.float64), np.ascontiguousarray(v, np.float64),
+                         np.ascontiguousarray(raw[0]), np.ascontiguousarray(raw[1], np.int64),
+                         2)[5]
+    np.testing.assert_allclose(half, _global_frame(du[::2, :4], dv[::2, :4], dist[::2, :4],
+                                                   spacing), rtol=0, atol=1e-12)
+    far = lattice_setup(np.array([0.0, 100.0, 300.0]), np.zeros(3),
+                        np.array([[100.0, 300.0], [100.0, 200.0], [200.0, 300.0]]),
+                        np.array([[1, 2], [0, 2], [1, 0]]), 1)
+    assert far[4] == 100.0 and tuple(far[5]) == (1.0, 0.0)

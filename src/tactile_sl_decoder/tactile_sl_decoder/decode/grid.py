@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from tactile_sl_decoder.decode.links import lattice_vectors, neighbour_table
+from tactile_sl_decoder.decode.links import lattice_setup, lattice_vectors, neighbour_table
 from tactile_sl_decoder.neighbours import knn_within
 
 # Offsets of the 3x3 neighbourhood, row-major: index 3 * (dr + 1) + (dc + 1).
@@ -84,17 +84,6 @@ def _empty(n: int, pts: np.ndarray | None = None) -> Grid:
     nbr[:, CENTRE] = np.arange(n)
     return Grid(nbr, np.zeros((n, 2)), np.zeros((n, 2)), 0.0,
                 np.zeros((n, 2)) if pts is None else pts, np.full(n, np.inf))
-
-
-def _global_frame(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, spacing: float
-                  ) -> np.ndarray:
-    """Unit column direction (closest lattice axis to +u) from short displacements."""
-    short = (dist > 0.5 * spacing) & (dist < 1.25 * spacing)
-    if not short.any():
-        return np.array([1.0, 0.0])
-    theta = np.arctan2(dv[short], du[short])
-    phi = np.angle(np.exp(4j * theta).sum()) / 4.0   # in (-45, 45] degrees: closest to +u
-    return np.array([np.cos(phi), np.sin(phi)])
 
 
 def _local_spacings(dist: np.ndarray, idx: np.ndarray, valid: np.ndarray
@@ -152,8 +141,8 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     ``k = params.k_neighbours``, if already computed (e.g. per image and offset).
     """
     p = params or GridParams()
-    u = np.asarray(u, np.float64).reshape(-1)
-    v = np.asarray(v, np.float64).reshape(-1)
+    u = np.ascontiguousarray(np.asarray(u, np.float64).reshape(-1))
+    v = np.ascontiguousarray(np.asarray(v, np.float64).reshape(-1))
     pts = np.column_stack([u, v])
     n = len(pts)
     if n < 3:
@@ -161,16 +150,13 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     if neighbours is None:
         neighbours = nearest_neighbours(u, v, min(p.k_neighbours, n), spacing_hint)
     dist, idx = neighbours
-    valid = np.isfinite(dist)
-    idx = np.where(valid, idx, 0)                     # missing -> masked by `valid`
-    du = u[idx] - u[:, None]                          # (N, K) displacements, contiguous
-    dv = v[idx] - v[:, None]
-    nn = dist[:, 0]
-    spacing = float(np.median(nn[valid[:, 0]])) if valid[:, 0].any() else 0.0
+    # displacements to the candidates, spacing and orientation in one compiled pass
+    du, dv, valid, idx, spacing, col_dir = lattice_setup(
+        u, v, np.ascontiguousarray(dist, np.float64), np.ascontiguousarray(idx, np.int64),
+        max(1, n // 400))                         # a few hundred glyphs are plenty
     if not np.isfinite(spacing) or spacing <= 0:
         return _empty(n, pts)
-    step = max(1, n // 400)                           # a few hundred glyphs are plenty
-    col_dir = _global_frame(du[::step, :4], dv[::step, :4], dist[::step, :4], spacing)
+    nn = dist[:, 0]
     row_dir = np.array([-col_dir[1], col_dir[0]])     # +v side of the column direction
     short: float | np.ndarray = spacing
     long: float | np.ndarray = spacing

@@ -237,3 +237,65 @@ def lattice_vectors(du: np.ndarray, dv: np.ndarray, dist: np.ndarray, valid: np.
     for _ in range(smooth_iterations):
         vec = _median_of_four_neighbours(vec, nbr4)
     return vec, nbr4
+
+
+@kernel("Tuple((float64[:, ::1], float64[:, ::1], boolean[:, ::1], int64[:, ::1], float64, "
+        "float64[::1]))(float64[::1], float64[::1], float64[:, ::1], int64[:, ::1], int64)")
+def lattice_setup(u: np.ndarray, v: np.ndarray, dist: np.ndarray, idx: np.ndarray,
+                  step: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float,
+                                      np.ndarray]:
+    """Steps 1-2 of the lattice on a k-NN table: displacements, spacing and orientation.
+
+    ``dist``, ``idx`` (N, K): the k-NN table (``inf``: no candidate).  Returns the
+    displacements ``du``, ``dv`` (N, K) to the candidates, which are ``valid``, their indices
+    (0 where not valid), the spacing (median distance to the nearest glyph; 0 if none) and
+    the unit column direction: the lattice axis closest to +u, from the 4-fold circular mean
+    of the short displacements (length 0.5-1.25 spacings) among the first four candidates of
+    every ``step``-th glyph, ((1, 0) if there are none).  The 4-fold mean sums
+    (c + i s)^4 = cos 4t + i sin 4t of each unit displacement by products, without
+    trigonometry (Mardia & Jupp, Directional Statistics, 2000, sec. 2.2.2: the p-th
+    trigonometric moment; phi = arg(sum) / 4).
+    """
+    n, k = dist.shape
+    du = np.empty((n, k))
+    dv = np.empty((n, k))
+    valid = np.empty((n, k), np.bool_)
+    out_idx = np.zeros((n, k), np.int64)
+    nearest = np.empty(n)
+    m = 0
+    for i in range(n):
+        for j in range(k):
+            ok = np.isfinite(dist[i, j])
+            valid[i, j] = ok
+            t = idx[i, j] if ok else 0
+            out_idx[i, j] = t
+            du[i, j] = u[t] - u[i]
+            dv[i, j] = v[t] - v[i]
+        if k > 0 and valid[i, 0]:
+            nearest[m] = dist[i, 0]
+            m += 1
+    spacing = np.median(nearest[:m]) if m else 0.0
+    direction = np.array([1.0, 0.0])
+    if not (spacing > 0.0 and np.isfinite(spacing)):
+        return du, dv, valid, out_idx, spacing, direction
+    re = 0.0
+    im = 0.0
+    found = False
+    for i in range(0, n, step):
+        for j in range(min(4, k)):
+            d = dist[i, j]
+            if d > 0.5 * spacing and d < 1.25 * spacing:
+                r = np.hypot(du[i, j], dv[i, j])
+                if r > 0.0:
+                    c = du[i, j] / r
+                    s = dv[i, j] / r
+                    c2 = c * c - s * s
+                    s2 = 2.0 * c * s
+                    re += c2 * c2 - s2 * s2
+                    im += 2.0 * c2 * s2
+                    found = True
+    if found:
+        phi = np.arctan2(im, re) / 4.0
+        direction[0] = np.cos(phi)
+        direction[1] = np.sin(phi)
+    return du, dv, valid, out_idx, spacing, direction
