@@ -53,8 +53,10 @@ def pack_points(xyz: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarr
         raise CloudFormatError("xyz, rows and cols differ in length")
     if not np.isfinite(xyz).all():
         raise CloudFormatError("non-finite point coordinates (the cloud must be dense)")
-    if len(rows) and len(np.unique(rows.astype(np.int64) * 1_000_003 + cols)) != len(rows):
-        raise CloudFormatError("two points for the same cell")
+    if len(rows) > 1:
+        keys = np.sort(rows.astype(np.int64) * 1_000_003 + cols)   # (np.unique: 10x slower)
+        if (keys[1:] == keys[:-1]).any():
+            raise CloudFormatError("two points for the same cell")
     points = np.empty(len(xyz), dtype=POINT_DTYPE)
     points["x"], points["y"], points["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
     points["row"], points["col"] = rows, cols

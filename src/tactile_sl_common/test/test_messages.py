@@ -2,9 +2,10 @@
 import array
 
 import numpy as np
+import pytest
 from builtin_interfaces.msg import Time
 
-from tactile_sl_common.clouds import cloud_fields, cloud_to_arrays, pack_points
+from tactile_sl_common.clouds import CloudFormatError, cloud_fields, cloud_to_arrays, pack_points
 from tactile_sl_common.images import image_fields
 from tactile_sl_common.nodes.messages import (
     cloud_msg,
@@ -45,3 +46,11 @@ def test_image_msg_takes_a_given_stamp_and_frame_over_the_dicts():
     assert (msg.height, msg.width, msg.step, msg.encoding) == (3, 4, 4, "mono8")
     assert bytes(msg.data) == pixels.tobytes()
     assert msg.header.frame_id == "cam" and msg.header.stamp.sec == 7
+
+
+def test_pack_points_refuses_two_points_for_one_cell():
+    xyz = np.zeros((4, 3))
+    pack_points(xyz, np.array([0, 0, 1, 1]), np.array([0, 1, 0, 1]))     # all distinct
+    pack_points(xyz[:1], np.array([7]), np.array([7]))                    # one point
+    with pytest.raises(CloudFormatError, match="same cell"):
+        pack_points(xyz, np.array([0, 1, 2, 1]), np.array([5, 6, 7, 6]))

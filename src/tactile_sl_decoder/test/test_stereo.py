@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tactile_sl_common.camera_info import CameraCalibration, CameraInfoError, camera_info_fields
-from tactile_sl_decoder.stereo.stereo import StereoRig, match_and_triangulate
+from tactile_sl_decoder.stereo.stereo import StereoRig, common_cells, match_and_triangulate
 
 
 def _rig(alpha: float = 0.0, distort: bool = True):
@@ -121,3 +121,14 @@ def test_ray_intersection_kernel_equals_the_numpy_version():
     uv_right[:5] = uv_left[:5]                       # zero disparity: far / degenerate rays
     got, _err = rig.triangulate_rectified(uv_left, uv_right)
     np.testing.assert_array_equal(got, _triangulate_reference(rig, uv_left, uv_right))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_common_cells_is_intersect1d(seed):
+    rng = np.random.default_rng(seed)
+    left = rng.permutation(2000)[:rng.integers(0, 900)].astype(np.int64)
+    right = rng.permutation(2000)[:rng.integers(0, 900)].astype(np.int64)
+    want = np.intersect1d(left, right, assume_unique=True, return_indices=True)
+    for got, ref in zip(common_cells(left, right), want):
+        np.testing.assert_array_equal(got, ref)
+        assert got.dtype == ref.dtype

@@ -191,6 +191,22 @@ class StereoMatch:
     rejected: int          # cell pairs dropped by the plausibility gates
 
 
+def common_cells(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                   np.ndarray]:
+    """The cells both (unique, >= 0) int64 arrays hold, ascending, and where each holds them.
+
+    What ``np.intersect1d(left, right, assume_unique=True, return_indices=True)`` gives, by
+    a table over the cell numbers instead of a merge sort (a tenth of its cost here).
+    """
+    size = int(max(left.max(initial=-1), right.max(initial=-1))) + 1
+    at_left = np.full(size, -1, np.intp)
+    at_left[left] = np.arange(len(left))
+    at_right = np.full(size, -1, np.intp)
+    at_right[right] = np.arange(len(right))
+    common = np.flatnonzero((at_left >= 0) & (at_right >= 0))
+    return common, at_left[common], at_right[common]
+
+
 def match_and_triangulate(rig: StereoRig, uv_left: np.ndarray, cell_left: np.ndarray,
                           uv_right: np.ndarray, cell_right: np.ndarray, ncols: int,
                           params: StereoParams | None = None,
@@ -207,8 +223,7 @@ def match_and_triangulate(rig: StereoRig, uv_left: np.ndarray, cell_left: np.nda
     cell_right = np.asarray(cell_right, dtype=np.int64)
     il = np.flatnonzero(cell_left >= 0)
     ir = np.flatnonzero(cell_right >= 0)
-    common, a, b = np.intersect1d(cell_left[il], cell_right[ir], assume_unique=True,
-                                  return_indices=True)
+    common, a, b = common_cells(cell_left[il], cell_right[ir])
     il, ir = il[a], ir[b]
     if rect_left is not None and rect_right is not None:
         x_rect, err = rig.triangulate_rectified(np.asarray(rect_left)[il],

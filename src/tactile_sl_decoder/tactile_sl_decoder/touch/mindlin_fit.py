@@ -106,7 +106,7 @@ def parabola_vertex(r_minus: float, r0: float, r_plus: float) -> float:
     den = r_minus - 2.0 * r0 + r_plus
     if not math.isfinite(den) or den <= 0:
         return 0.0
-    return float(np.clip(0.5 * (r_minus - r_plus) / den, -1.0, 1.0))
+    return min(max(float(0.5 * (r_minus - r_plus) / den), -1.0), 1.0)   # NaN stays NaN
 
 
 _DI, _DJ = (v.ravel() for v in np.mgrid[-1:2, -1:2])

@@ -212,7 +212,7 @@ class SlipEstimator:
         project = self._others(rest, contacts[1:])
         u = project(u)
         # 2. centre and direction: pressure + tangential x, y at the first radius
-        i_first = int(np.clip(round(first / step), i_lo, i_hi))
+        i_first = min(max(round(first / step), i_lo), i_hi)   # (np.clip: 30 us on a scalar)
         first_table = np.array([stride * i_first])
         fitted = self._first_fit(rest, centre, u, first_table, project)
         if fitted is None:
