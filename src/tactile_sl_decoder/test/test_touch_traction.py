@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tactile_sl_common.elasticity import Elastomer, surface_displacement
-from tactile_sl_decoder.touch.traction import TractionParams, TractionSolver
+from tactile_sl_decoder.touch.traction import TractionParams, TractionSolver, _band_rows
 
 PITCH = 5e-4
 SHAPE = (22, 20)
@@ -86,3 +86,18 @@ def test_bad_parameters_are_refused():
         TractionParams(map_weight=0.0).validate()
     with pytest.raises(ValueError, match="support_fraction"):
         TractionParams(support_fraction=1.5).validate()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_band_rows_give_the_band_products_bits(seed):
+    """The shear rows of the contact alone equal those of the band product, bit for bit (the
+    points and touch digests depend on it; a BLAS that computes otherwise falls back)."""
+    rng = np.random.default_rng(seed)
+    matrix = rng.standard_normal((300, 900)).astype(np.float32)
+    for _ in range(40):
+        vector = rng.standard_normal(900).astype(np.float32)
+        start = int(rng.integers(0, 290))
+        stop = int(rng.integers(start + 1, 301))
+        rows = np.flatnonzero(rng.random(stop - start) < rng.uniform(0.05, 0.9))
+        np.testing.assert_array_equal(_band_rows(matrix, start, stop, rows, vector),
+                                      (matrix[start:stop] @ vector)[rows])
