@@ -149,10 +149,11 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
         return _empty(n, pts)
     if neighbours is None:
         neighbours = nearest_neighbours(u, v, min(p.k_neighbours, n), spacing_hint)
-    dist, idx = neighbours
-    # displacements to the candidates, spacing and orientation in one compiled pass
+    dist = np.ascontiguousarray(neighbours[0], np.float64)
+    # displacements to the candidates (contiguous), spacing and orientation in one compiled
+    # pass
     du, dv, valid, idx, spacing, col_dir = lattice_setup(
-        u, v, np.ascontiguousarray(dist, np.float64), np.ascontiguousarray(idx, np.int64),
+        u, v, dist, np.ascontiguousarray(neighbours[1], np.int64),
         max(1, n // 400))                         # a few hundred glyphs are plenty
     if not np.isfinite(spacing) or spacing <= 0:
         return _empty(n, pts)
@@ -168,9 +169,7 @@ def build_grid(u: np.ndarray, v: np.ndarray, params: GridParams | None = None,
     # compiled pass (links.lattice_vectors).
     fallback = spacing if not p.local_gates else np.sqrt(short * long)
     both, _nbr4 = lattice_vectors(
-        np.ascontiguousarray(du), np.ascontiguousarray(dv), np.ascontiguousarray(dist),
-        np.ascontiguousarray(valid), np.ascontiguousarray(idx, dtype=np.int64),
-        np.ascontiguousarray(col_dir, np.float64), np.ascontiguousarray(row_dir, np.float64),
+        du, dv, dist, valid, idx, col_dir, row_dir,
         _per_glyph(p.init_min_len * short, n), _per_glyph(p.init_max_len * long, n),
         float(np.cos(np.radians(p.init_angle_deg))),
         np.broadcast_to(col_dir * fallback, (n, 2)).astype(np.float64, order="C"),

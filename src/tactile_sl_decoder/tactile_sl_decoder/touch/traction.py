@@ -98,6 +98,14 @@ def _code_digest() -> str:
     return source_digest(sys.modules[__name__], cholesky)
 
 
+def _runs(values: np.ndarray, max_step: int = 1) -> list[tuple[int, int]]:
+    """(first, last + 1) index pairs of the runs of sorted ``values`` stepping <= ``max_step``."""
+    if len(values) == 0:
+        return []
+    cut = (np.flatnonzero(np.diff(values) > max_step) + 1).tolist()
+    return list(zip([0] + cut, cut + [len(values)]))
+
+
 def _rows_product(matrix: np.ndarray, rows: np.ndarray, vector: np.ndarray) -> np.ndarray:
     """``(matrix[rows] @ vector)`` in float64 without copying the rows (sorted, unique).
 
@@ -105,10 +113,7 @@ def _rows_product(matrix: np.ndarray, rows: np.ndarray, vector: np.ndarray) -> n
     rows are read in place, and rows between the runs (between two contacts) not at all.
     """
     out = np.empty(len(rows))
-    if len(rows) == 0:
-        return out
-    breaks = np.flatnonzero(np.diff(rows) != 1) + 1
-    for start, stop in zip(np.concatenate(([0], breaks)), np.concatenate((breaks, [len(rows)]))):
+    for start, stop in _runs(rows):
         out[start:stop] = matrix[rows[start]:rows[stop - 1] + 1] @ vector
     return out
 
@@ -131,15 +136,13 @@ def _band_rows(matrix: np.ndarray, start: int, stop: int, rows: np.ndarray,
         return (matrix[start:stop] @ vector)[rows]
     out = np.empty(len(rows), np.result_type(matrix, vector))
     inside = np.flatnonzero(rows < body)
-    if len(inside):
-        block = rows[inside] // 4
-        # one product per run of blocks (gaps of one block are read through: a call costs
-        # about what two rows do)
-        cut = np.flatnonzero(np.diff(block) > 2) + 1
-        for first, last in zip(np.concatenate(([0], cut)), np.concatenate((cut, [len(block)]))):
-            b0 = int(block[first])
-            seg = matrix[start + 4 * b0:start + 4 * (int(block[last - 1]) + 1)] @ vector
-            out[inside[first:last]] = seg[rows[inside[first:last]] - 4 * b0]
+    block = rows[inside] // 4
+    # one product per run of blocks (gaps of one block are read through: a call costs about
+    # what two rows do)
+    for first, last in _runs(block, max_step=2):
+        b0 = int(block[first])
+        seg = matrix[start + 4 * b0:start + 4 * (int(block[last - 1]) + 1)] @ vector
+        out[inside[first:last]] = seg[rows[inside[first:last]] - 4 * b0]
     tail = np.flatnonzero(rows >= body)
     if len(tail):
         seg = matrix[start + body - 4:stop] @ vector
