@@ -28,7 +28,6 @@ can correct the glyph from its neighbours instead of trusting a guess.
 """
 from __future__ import annotations
 
-import functools
 import pickle
 import warnings
 from dataclasses import dataclass, field
@@ -229,11 +228,15 @@ class FastTiny:
     :class:`FastLeNet`).
 
     That is some 25 numpy calls on small arrays, each holding the GIL between them, so the
-    two images' workers stall each other: :meth:`_logits` runs everything up to the hidden
-    layer as one kernel (:func:`_tiny_hidden`, GIL released) that gives the numpy code's
-    bits, and only the last product stays numpy's (OpenBLAS sums it in an order not
-    reproduced).  Where the kernel is not known to be exact (another OpenBLAS / numpy
-    build, a hand-made band, one patch: numpy's gemv) :meth:`_numpy_logits` runs.
+    two images' workers stall each other, and OpenBLAS sums each product in an order that
+    depends on the CPU it finds (and on the batch: one patch takes gemv).  So uint8 patches
+    (the sensor's) go through one kernel, :func:`_tiny_logits` (GIL released): the same
+    arithmetic, each sum a sequence of fused multiply-adds from 0 in ascending k, so the
+    logits are the same bits on every machine and for every batch size.  OpenBLAS's
+    AVX-512 sgemm sums in exactly that order, so there the numpy code gives the kernel's
+    bits (test); on other CPUs (AVX2: another order) it differs in the last bits.
+    :meth:`_numpy_logits` runs for other inputs (float patches) and bands of another
+    layout.
     """
 
     band: np.ndarray   # (27, 8 * C): 3 pooled rows x 9 cols -> cols (0,2,4,6,1,3,5,6) x C
@@ -278,23 +281,19 @@ class FastTiny:
         return out
 
     def _logits(self, patches: np.ndarray) -> np.ndarray:
-        """:meth:`_numpy_logits`, through :func:`_tiny_hidden` where that is exact."""
+        """:func:`_tiny_logits` for uint8 patches, :meth:`_numpy_logits` otherwise."""
         taps = self._taps()
-        if len(patches) < 2 or patches.dtype != np.uint8 or taps is None \
-                or not _tiny_kernel_is_exact(self.s1.shape[0], self.w2.shape[1]):
+        if patches.dtype != np.uint8 or taps is None:
             return self._numpy_logits(patches)
         return self._kernel_logits(patches, taps)
 
     def _kernel_logits(self, patches: np.ndarray, taps: np.ndarray) -> np.ndarray:
-        """The kernel's hidden layer, then numpy's last product (one GIL-free call each)."""
+        """The whole network in one GIL-free call (:func:`_tiny_logits`)."""
         x = np.ascontiguousarray(patches).reshape(len(patches), PATCH_SIZE * PATCH_SIZE)
-        h = _tiny_hidden(x, taps, self.s1, self.b1, self.w2, self.b2)
-        out = h @ self.w3
-        out += self.b3
-        return out
+        return _tiny_logits(x, taps, self.s1, self.b1, self.w2, self.b2, self.w3, self.b3)
 
     def _taps(self) -> np.ndarray | None:
-        """The (3, 3, C) convolution taps :func:`_tiny_hidden` reads, or None.
+        """The (3, 3, C) convolution taps :func:`_tiny_logits` reads, or None.
 
         None where the band is not the layout :meth:`from_state` makes (the kernel reads
         only the 3x3 taps) or the arrays are not of the kernel's types.  Built once per band
@@ -320,7 +319,11 @@ class FastTiny:
         return found
 
     def _numpy_logits(self, patches: np.ndarray) -> np.ndarray:
-        """The reference: numpy, OpenBLAS and OpenCV calls (what the kernel reproduces)."""
+        """The same network through numpy, OpenBLAS and OpenCV (float patches, other bands).
+
+        Its products are summed as OpenBLAS does on the CPU at hand: with AVX-512 sgemm, in
+        the kernel's order (the same bits); elsewhere in another (the last bits differ).
+        """
         n = patches.shape[0]
         channels = self.s1.shape[0]
         x = np.ascontiguousarray(patches).reshape(n, PATCH_SIZE * PATCH_SIZE).astype(np.float32)
@@ -352,41 +355,8 @@ class FastTiny:
         return out
 
 
-@functools.cache
-def _tiny_kernel_is_exact(channels: int, hidden: int) -> bool:
-    """Whether :func:`_tiny_hidden` gives :meth:`FastTiny._numpy_logits`'s bits, per shape.
-
-    Checked once per process on a fixed sample (random weights of this shape; uniform,
-    bright, flat and glyph-like patches, so sums of squares above 2^24 that round too) at
-    batch sizes 2..512 that take OpenBLAS's different paths (direct, blocked, threaded).
-    The shipped shape (16 channels, 32 hidden units) is exact with OpenBLAS 0.3.31 on an
-    AVX-512 CPU; some others are not (OpenBLAS sums small products with 24 columns in
-    another order): they run :meth:`FastTiny._numpy_logits`.
-    """
-    rng = np.random.default_rng(20261203)
-    net = FastTiny.from_state({
-        "conv1.weight": rng.standard_normal((channels, 1, 3, 3)).astype(np.float32),
-        "conv1.bias": rng.standard_normal(channels).astype(np.float32),
-        "fc1.weight": (rng.standard_normal((hidden, 16 * channels)) * 0.2).astype(np.float32),
-        "fc1.bias": rng.standard_normal(hidden).astype(np.float32),
-        "out.weight": rng.standard_normal((3, hidden)).astype(np.float32),
-        "out.bias": rng.standard_normal(3).astype(np.float32)})
-    taps = net._taps()
-    if taps is None:
-        return False
-    sizes = (2, 3, 4, 6, 9, 13, 19, 28, 42, 64, 96, 144, 216, 324, 512)
-    patches = _check_sample(rng, sum(sizes))
-    start = 0
-    for n in sizes:
-        part = patches[start:start + n]
-        start += n
-        if not np.array_equal(net._kernel_logits(part, taps), net._numpy_logits(part)):
-            return False
-    return True
-
-
 def _check_sample(rng: np.random.Generator, n: int) -> np.ndarray:
-    """(n, 18, 18) uint8 patches for :func:`_tiny_kernel_is_exact`, shuffled.
+    """(n, 18, 18) uint8 patches that exercise :func:`_tiny_logits`' arithmetic, shuffled.
 
     A quarter uniform noise, a quarter bright (200..255: sums of squares past 2^24, where
     float32 sums round), a few flat, the rest glyph-like: a dark disc, ring or bar on a
@@ -411,11 +381,11 @@ def _check_sample(rng: np.random.Generator, n: int) -> np.ndarray:
     return np.clip(np.rint(out[rng.permutation(n)]), 0, 255).astype(np.uint8)
 
 
-_HIDDEN_SIGNATURE = ("float32[:, ::1]({x}, float32[:, :, ::1], float32[::1], float32[::1], "
-                     "float32[:, ::1], float32[::1])")
+_LOGITS_SIGNATURE = ("float32[:, ::1]({x}, float32[:, :, ::1], float32[::1], float32[::1], "
+                     "float32[:, ::1], float32[::1], float32[:, ::1], float32[::1])")
 
 _KERNEL_BLOCK = 128
-"""Patches :func:`_tiny_hidden` takes at once: its loops run across them (long enough for
+"""Patches :func:`_tiny_logits` takes at once: its loops run across them (long enough for
 vector instructions) while the block's intermediate arrays stay in cache."""
 
 @helper
@@ -505,24 +475,38 @@ def _dense(feats: np.ndarray, w2: np.ndarray, b2: np.ndarray, m: int, acc: np.nd
             out[b, j] = v if v > zero else zero
 
 
-@kernel([_HIDDEN_SIGNATURE.format(x="uint8[:, ::1]"),
-         _HIDDEN_SIGNATURE.format(x="Array(uint8, 2, 'C', readonly=True)")])
-def _tiny_hidden(x: np.ndarray, taps: np.ndarray, s1: np.ndarray, b1: np.ndarray,
-                 w2: np.ndarray, b2: np.ndarray) -> np.ndarray:
-    """(N, hidden) ReLU'd hidden layer of :class:`FastTiny` for (N, 324) uint8 patches.
+@helper
+def _output(hidden: np.ndarray, w3: np.ndarray, b3: np.ndarray, m: int,
+            out: np.ndarray) -> None:
+    """out[b] = hidden[b] @ w3 + b3 (the sum from 0, k ascending, then the bias)."""
+    zero = np.float32(0.0)
+    for b in range(m):
+        for c in range(w3.shape[1]):
+            a = zero
+            for k in range(w3.shape[0]):
+                a = fma32(hidden[b, k], w3[k, c], a)
+            out[b, c] = a + b3[c]
 
-    :meth:`FastTiny._numpy_logits`'s arithmetic in its order, in blocks of
-    :data:`_KERNEL_BLOCK` patches (the innermost loops run across a block's patches, so
-    they become vector instructions).  The integer sums (mean, 2x2 area pool) are exact in
-    any order; numpy einsum's sum of squares is exact up to its one rounding at the end
-    (four lanes of at most 81 squares, then their total: float32(total) rounds alike);
-    each matrix product is OpenBLAS sgemm's sequence of fused multiply-adds from 0, k
-    ascending.  ``taps`` (3, 3, C) is the band's 3x3 kernels (0.25 x conv1).
+
+@kernel([_LOGITS_SIGNATURE.format(x="uint8[:, ::1]"),
+         _LOGITS_SIGNATURE.format(x="Array(uint8, 2, 'C', readonly=True)")])
+def _tiny_logits(x: np.ndarray, taps: np.ndarray, s1: np.ndarray, b1: np.ndarray,
+                 w2: np.ndarray, b2: np.ndarray, w3: np.ndarray, b3: np.ndarray
+                 ) -> np.ndarray:
+    """(N, classes) logits of :class:`FastTiny` for (N, 324) uint8 patches.
+
+    :meth:`FastTiny._numpy_logits`'s arithmetic, in blocks of :data:`_KERNEL_BLOCK`
+    patches (the innermost loops run across a block's patches, so they become vector
+    instructions).  The integer sums (mean, 2x2 area pool) are exact in any order; the sum
+    of squares is exact and rounded once to float32 (as numpy's einsum's four lanes of at
+    most 81 squares and their total round); each matrix product is a sequence of fused
+    multiply-adds from 0, k ascending (OpenBLAS's AVX-512 sgemm order).  ``taps`` (3, 3, C)
+    is the band's 3x3 kernels (0.25 x conv1).
     """
     n = x.shape[0]
     channels = s1.shape[0]
     hidden = w2.shape[1]
-    out = np.empty((n, hidden), np.float32)
+    out = np.empty((n, w3.shape[1]), np.float32)
     if n == 0:
         return out
     block = min(n, _KERNEL_BLOCK)
@@ -532,11 +516,13 @@ def _tiny_hidden(x: np.ndarray, taps: np.ndarray, s1: np.ndarray, b1: np.ndarray
     conv = np.empty((49, block), np.float32)
     feats = np.empty((16 * channels, block), np.float32)
     acc = np.empty((hidden, block), np.float32)
+    layer = np.empty((block, hidden), np.float32)
     for start in range(0, n, block):
         m = min(block, n - start)
         _standardise_pool(x, start, m, inv, shift, pooled)
         _conv_pool(pooled, taps, s1, b1, inv, shift, m, conv, feats)
-        _dense(feats, w2, b2, m, acc, out[start:start + m])
+        _dense(feats, w2, b2, m, acc, layer)
+        _output(layer, w3, b3, m, out[start:start + m])
     return out
 
 
