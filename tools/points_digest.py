@@ -10,8 +10,8 @@ Per bag and output topic (points, field, wrench, contact, depth, slip): per mess
 size (points / cells for the clouds, 1 otherwise) and the SHA-256 of its serialised data.
 Stamps and sizes hold on every machine (``frames``); the bytes only on the CPU model they
 were computed on (numpy and OpenCV pick SIMD code paths per CPU, which can move a float's
-last bit), so they are kept per CPU model (``digests``): writing adds or replaces this
-CPU's entry and keeps the others' for the bags whose frames did not change.
+last bit), so they are kept per CPU model and vector extension (``digests``): writing adds
+or replaces this CPU's entry and keeps the others' for the outputs it did not change here.
 """
 from __future__ import annotations
 
@@ -30,14 +30,24 @@ TOPICS = ("points", "field", "wrench", "contact", "depth", "slip")
 
 
 def cpu_model() -> str:
-    """The CPU's model name (float results may differ in the last bit between SIMD paths)."""
+    """The CPU's model name and widest vector extension: the key of its digests.
+
+    Float results may differ in the last bit between SIMD code paths, which numpy, OpenCV
+    and OpenBLAS choose by the CPU's extensions; a virtual machine's model name alone
+    ("AMD EPYC") covers CPUs with and without AVX-512.
+    """
+    name, flags = "", set()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
+            if line.startswith("model name") and not name:
+                name = line.split(":", 1)[1].strip()
+            elif line.startswith("flags") and not flags:
+                flags = set(line.split(":", 1)[1].split())
     except OSError:
         pass
-    return platform.processor() or "unknown"
+    name = name or platform.processor() or "unknown"
+    widest = next((f for f in ("avx512f", "avx2", "avx", "sse4_2") if f in flags), "")
+    return f"{name} [{widest}]" if widest else name
 
 
 def replay_digests(bag: Path, workdir: Path) -> dict[str, list[list[Any]]]:
@@ -75,16 +85,28 @@ def bag_digests(bags: list[Path]) -> dict[str, dict[str, list[list[Any]]]]:
 
 
 def record(digests: dict[str, Any], old: dict[str, Any] | None) -> dict[str, Any]:
-    """The file's content: frames and sizes, this CPU's bytes, other CPUs' still valid ones."""
+    """The file's content: frames and sizes, this CPU's bytes, other CPUs' still valid ones.
+
+    Another CPU's digests of a bag's topic are kept only where this CPU's are as recorded
+    before (the change being recorded did not alter that output here); where it did, the
+    other CPU's bytes have most likely changed too, and are dropped until recorded there.
+    """
     frames = {bag: {t: [m[:2] for m in msgs] for t, msgs in topics.items()}
               for bag, topics in digests.items()}
     cpu = cpu_model()
-    by_cpu: dict[str, Any] = {cpu: {bag: {t: [m[2] for m in msgs] for t, msgs in topics.items()}
-                                    for bag, topics in digests.items()}}
+    mine = {bag: {t: [m[2] for m in msgs] for t, msgs in topics.items()}
+            for bag, topics in digests.items()}
+    before = (old or {}).get("digests", {}).get(cpu)
+    by_cpu: dict[str, Any] = {cpu: mine}
+
+    def unchanged(bag: str, topic: str) -> bool:
+        if before is None:           # not recorded here before: the sizes must hold
+            return old["frames"].get(bag, {}).get(topic) == frames[bag].get(topic)
+        return before.get(bag, {}).get(topic) == mine[bag].get(topic)
+
     for other, bags in (old or {}).get("digests", {}).items():
-        if other != cpu:       # kept for the bags (topics) whose frames are unchanged
-            by_cpu[other] = {bag: {t: h for t, h in topics.items()
-                                   if old["frames"].get(bag, {}).get(t) == frames[bag].get(t)}
+        if other != cpu:
+            by_cpu[other] = {bag: {t: h for t, h in topics.items() if unchanged(bag, t)}
                              for bag, topics in bags.items() if bag in frames}
     return {"frames": frames, "digests": by_cpu}
 
