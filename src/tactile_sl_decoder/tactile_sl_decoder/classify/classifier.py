@@ -233,8 +233,9 @@ class FastTiny:
     (the sensor's) go through one kernel, :func:`_tiny_logits` (GIL released): the same
     arithmetic, each sum a sequence of fused multiply-adds from 0 in ascending k, so the
     logits are the same bits on every machine and for every batch size.  OpenBLAS's
-    AVX-512 sgemm sums in exactly that order, so there the numpy code gives the kernel's
-    bits (test); on other CPUs (AVX2: another order) it differs in the last bits.
+    AVX-512 sgemm sums the convolution and the hidden layer in exactly that order (the
+    numpy code gives the kernel's hidden layer there, bit for bit; its last, 32-term
+    product another order); on AVX2 CPUs every product differs in the last bits.
     :meth:`_numpy_logits` runs for other inputs (float patches) and bands of another
     layout.
     """
@@ -321,8 +322,8 @@ class FastTiny:
     def _numpy_logits(self, patches: np.ndarray) -> np.ndarray:
         """The same network through numpy, OpenBLAS and OpenCV (float patches, other bands).
 
-        Its products are summed as OpenBLAS does on the CPU at hand: with AVX-512 sgemm, in
-        the kernel's order (the same bits); elsewhere in another (the last bits differ).
+        Its products are summed as OpenBLAS does on the CPU at hand, so its logits are
+        within float32 rounding of the kernel's, not its bits (docs/extraction.md).
         """
         n = patches.shape[0]
         channels = self.s1.shape[0]
@@ -500,7 +501,8 @@ def _tiny_logits(x: np.ndarray, taps: np.ndarray, s1: np.ndarray, b1: np.ndarray
     instructions).  The integer sums (mean, 2x2 area pool) are exact in any order; the sum
     of squares is exact and rounded once to float32 (as numpy's einsum's four lanes of at
     most 81 squares and their total round); each matrix product is a sequence of fused
-    multiply-adds from 0, k ascending (OpenBLAS's AVX-512 sgemm order).  ``taps`` (3, 3, C)
+    multiply-adds from 0, k ascending (OpenBLAS's AVX-512 sgemm order for the convolution
+    and the hidden layer).  ``taps`` (3, 3, C)
     is the band's 3x3 kernels (0.25 x conv1).
     """
     n = x.shape[0]
