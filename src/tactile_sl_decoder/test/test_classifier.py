@@ -277,7 +277,7 @@ def _real_patches() -> np.ndarray:
 
 
 def _fma_reference(net: FastTiny, patches: np.ndarray) -> np.ndarray:
-    """The logits as :func:`_tiny_logits` defines them, written out independently.
+    """The hidden layer as :func:`_tiny_hidden` defines it, written out independently.
 
     Every product sum is a chain of fused multiply-adds from 0, k ascending; a fused
     multiply-add is computed in x87 extended precision (64-bit significand: the product of
@@ -315,19 +315,17 @@ def _fma_reference(net: FastTiny, patches: np.ndarray) -> np.ndarray:
     hidden = np.zeros((len(x), net.w2.shape[1]), np.float32)
     for k in range(net.w2.shape[0]):
         hidden = fma(feats[:, k:k + 1], net.w2[k], hidden)
-    hidden = np.maximum(hidden + net.b2, np.float32(0.0))
-    out = np.zeros((len(x), net.w3.shape[1]), np.float32)
-    for k in range(net.w3.shape[0]):
-        out = fma(hidden[:, k:k + 1], net.w3[k], out)
-    return out + net.b3
+    return np.maximum(hidden + net.b2, np.float32(0.0))
 
 
 def test_tiny_kernel_is_one_arithmetic_on_every_machine():
-    """The default classifier's logits of uint8 patches: fused multiply-adds from 0 in
-    ascending k, bit for bit (shipped and random weights; real, uniform, bright -- sums of
-    squares past 2^24 -- and flat patches), the same bits whatever the batch (one patch
-    alone, blocks of 128 and of 512), and within float32 rounding of the numpy code
-    (whose OpenBLAS sums in an order of its CPU's)."""
+    """The default classifier's hidden layer for uint8 patches: fused multiply-adds from 0
+    in ascending k, bit for bit (shipped and random weights; real, uniform, bright -- sums
+    of squares past 2^24 -- and flat patches), the same bits whatever the batch (blocks of
+    128 and of 512); the logits are that layer times numpy's last product, within float32
+    rounding of the numpy code (whose OpenBLAS sums in an order of its CPU's)."""
+    from tactile_sl_decoder.classify import classifier as classifier_module
+
     real = _real_patches()
     assert len(real) > 1000
     squares = (real.reshape(len(real), -1).astype(np.int64) ** 2).sum(axis=1)
@@ -344,44 +342,52 @@ def test_tiny_kernel_is_one_arithmetic_on_every_machine():
         for p in other.parameters():
             p.mul_(3.0)
     random_net = FastTiny.from_state({k: v.numpy() for k, v in other.state_dict().items()})
+
+    def hidden(net, patches):
+        return classifier_module._tiny_hidden(
+            np.ascontiguousarray(patches).reshape(len(patches), 324), net._taps(), net.s1,
+            net.b1, net.w2, net.b2)
+
     for net in (shipped, random_net):
         for patches in (real[:400], bright, uniform):
+            layer = hidden(net, patches)
+            assert np.array_equal(layer, _fma_reference(net, patches))
             got = net.logits(patches)
-            assert np.array_equal(got, _fma_reference(net, patches))
+            assert np.array_equal(got, layer @ net.w3 + net.b3)
             numpy_code = net._numpy_logits(patches)
             assert np.allclose(got, numpy_code, rtol=1e-5, atol=1e-5 * np.abs(got).max())
-            for n in (1, 2, 17, 129):
+            for n in (2, 17, 129):
                 start = int(rng.integers(0, len(patches) - n + 1))
-                assert np.array_equal(net.logits(patches[start:start + n]),
-                                      got[start:start + n]), n
+                assert np.array_equal(hidden(net, patches[start:start + n]),
+                                      layer[start:start + n]), n
         readonly = real[:600].copy()
         readonly.flags.writeable = False
-        assert np.array_equal(net.logits(readonly), np.concatenate(
-            [net.logits(real[:300]), net.logits(real[300:600])]))
+        assert np.array_equal(hidden(net, readonly), np.concatenate(
+            [hidden(net, real[:300]), hidden(net, real[300:600])]))
 
 
-def test_tiny_runs_numpy_for_float_patches_and_other_bands(monkeypatch):
-    """uint8 patches (any number, one included) take the kernel; float patches and a band
+def test_tiny_runs_numpy_for_one_patch_float_patches_and_other_bands(monkeypatch):
+    """uint8 batches take the kernel; one patch (numpy's gemv), float patches and a band
     of another layout take the numpy code."""
     from tactile_sl_decoder.classify import classifier as classifier_module
 
     net = Classifier.load().net
     patches = np.random.default_rng(2).integers(0, 256, (40, 18, 18), dtype=np.uint8)
     calls = []
-    kernel = classifier_module._tiny_logits
+    kernel = classifier_module._tiny_hidden
 
-    def logits(*args):
+    def counted(*args):
         calls.append(len(args[0]))
         return kernel(*args)
 
-    monkeypatch.setattr(classifier_module, "_tiny_logits", logits)
+    monkeypatch.setattr(classifier_module, "_tiny_hidden", counted)
     net.logits(patches)
-    net.logits(patches[:1])
-    assert calls == [40, 1]
+    assert calls == [40]
+    assert np.array_equal(net.logits(patches[:1]), net._numpy_logits(patches[:1]))
     assert np.array_equal(net.logits(patches.astype(np.float32)),
-                          net._numpy_logits(patches)) and calls == [40, 1]
+                          net._numpy_logits(patches)) and calls == [40]
     odd = FastTiny(net.band.copy(), net.s1, net.b1, net.w2, net.b2, net.w3, net.b3)
     odd.band[0, -1] = 0.5                      # a weight outside the 3x3 band
     assert odd._taps() is None and net._taps() is not None
     assert np.array_equal(odd.logits(patches), odd._numpy_logits(patches))
-    assert calls == [40, 1]
+    assert calls == [40]

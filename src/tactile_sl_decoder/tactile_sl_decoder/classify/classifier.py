@@ -228,16 +228,15 @@ class FastTiny:
     :class:`FastLeNet`).
 
     That is some 25 numpy calls on small arrays, each holding the GIL between them, so the
-    two images' workers stall each other, and OpenBLAS sums each product in an order that
-    depends on the CPU it finds (and on the batch: one patch takes gemv).  So uint8 patches
-    (the sensor's) go through one kernel, :func:`_tiny_logits` (GIL released): the same
-    arithmetic, each sum a sequence of fused multiply-adds from 0 in ascending k, so the
-    logits are the same bits on every machine and for every batch size.  OpenBLAS's
-    AVX-512 sgemm sums the convolution and the hidden layer in exactly that order (the
-    numpy code gives the kernel's hidden layer there, bit for bit; its last, 32-term
-    product another order); on AVX2 CPUs every product differs in the last bits.
-    :meth:`_numpy_logits` runs for other inputs (float patches) and bands of another
-    layout.
+    two images' workers stall each other: :meth:`_logits` runs everything up to the hidden
+    layer as one kernel (:func:`_tiny_hidden`, GIL released), and only the last product
+    stays numpy's.  The kernel sums each product as a chain of fused multiply-adds from 0
+    in ascending k, on every CPU: for the shipped network's shapes OpenBLAS's AVX-512 sgemm
+    sums in that order, so there it gives the numpy code's bits; on AVX2 CPUs (and for
+    some other shapes) OpenBLAS sums in another order and the two differ in the last bits
+    (labels and every bag's outputs unchanged, docs/extraction.md).
+    :meth:`_numpy_logits` runs for one patch (numpy's gemv, as always), float patches and
+    a band of another layout.
     """
 
     band: np.ndarray   # (27, 8 * C): 3 pooled rows x 9 cols -> cols (0,2,4,6,1,3,5,6) x C
@@ -282,19 +281,22 @@ class FastTiny:
         return out
 
     def _logits(self, patches: np.ndarray) -> np.ndarray:
-        """:func:`_tiny_logits` for uint8 patches, :meth:`_numpy_logits` otherwise."""
+        """:meth:`_numpy_logits`'s network, through :func:`_tiny_hidden` for uint8 batches."""
         taps = self._taps()
-        if patches.dtype != np.uint8 or taps is None:
+        if len(patches) < 2 or patches.dtype != np.uint8 or taps is None:
             return self._numpy_logits(patches)
         return self._kernel_logits(patches, taps)
 
     def _kernel_logits(self, patches: np.ndarray, taps: np.ndarray) -> np.ndarray:
-        """The whole network in one GIL-free call (:func:`_tiny_logits`)."""
+        """The kernel's hidden layer, then numpy's last product (one GIL-free call each)."""
         x = np.ascontiguousarray(patches).reshape(len(patches), PATCH_SIZE * PATCH_SIZE)
-        return _tiny_logits(x, taps, self.s1, self.b1, self.w2, self.b2, self.w3, self.b3)
+        h = _tiny_hidden(x, taps, self.s1, self.b1, self.w2, self.b2)
+        out = h @ self.w3
+        out += self.b3
+        return out
 
     def _taps(self) -> np.ndarray | None:
-        """The (3, 3, C) convolution taps :func:`_tiny_logits` reads, or None.
+        """The (3, 3, C) convolution taps :func:`_tiny_hidden` reads, or None.
 
         None where the band is not the layout :meth:`from_state` makes (the kernel reads
         only the 3x3 taps) or the arrays are not of the kernel's types.  Built once per band
@@ -320,10 +322,10 @@ class FastTiny:
         return found
 
     def _numpy_logits(self, patches: np.ndarray) -> np.ndarray:
-        """The same network through numpy, OpenBLAS and OpenCV (float patches, other bands).
+        """The network through numpy, OpenBLAS and OpenCV calls.
 
-        Its products are summed as OpenBLAS does on the CPU at hand, so its logits are
-        within float32 rounding of the kernel's, not its bits (docs/extraction.md).
+        Its products are summed as OpenBLAS does on the CPU at hand: on AVX-512, the
+        kernel's bits; on AVX2, within float32 rounding of them (docs/extraction.md).
         """
         n = patches.shape[0]
         channels = self.s1.shape[0]
@@ -357,7 +359,7 @@ class FastTiny:
 
 
 def _check_sample(rng: np.random.Generator, n: int) -> np.ndarray:
-    """(n, 18, 18) uint8 patches that exercise :func:`_tiny_logits`' arithmetic, shuffled.
+    """(n, 18, 18) uint8 patches that exercise :func:`_tiny_hidden`'s arithmetic, shuffled.
 
     A quarter uniform noise, a quarter bright (200..255: sums of squares past 2^24, where
     float32 sums round), a few flat, the rest glyph-like: a dark disc, ring or bar on a
@@ -382,11 +384,11 @@ def _check_sample(rng: np.random.Generator, n: int) -> np.ndarray:
     return np.clip(np.rint(out[rng.permutation(n)]), 0, 255).astype(np.uint8)
 
 
-_LOGITS_SIGNATURE = ("float32[:, ::1]({x}, float32[:, :, ::1], float32[::1], float32[::1], "
-                     "float32[:, ::1], float32[::1], float32[:, ::1], float32[::1])")
+_HIDDEN_SIGNATURE = ("float32[:, ::1]({x}, float32[:, :, ::1], float32[::1], float32[::1], "
+                     "float32[:, ::1], float32[::1])")
 
 _KERNEL_BLOCK = 128
-"""Patches :func:`_tiny_logits` takes at once: its loops run across them (long enough for
+"""Patches :func:`_tiny_hidden` takes at once: its loops run across them (long enough for
 vector instructions) while the block's intermediate arrays stay in cache."""
 
 @helper
@@ -476,39 +478,24 @@ def _dense(feats: np.ndarray, w2: np.ndarray, b2: np.ndarray, m: int, acc: np.nd
             out[b, j] = v if v > zero else zero
 
 
-@helper
-def _output(hidden: np.ndarray, w3: np.ndarray, b3: np.ndarray, m: int,
-            out: np.ndarray) -> None:
-    """out[b] = hidden[b] @ w3 + b3 (the sum from 0, k ascending, then the bias)."""
-    zero = np.float32(0.0)
-    for b in range(m):
-        for c in range(w3.shape[1]):
-            a = zero
-            for k in range(w3.shape[0]):
-                a = fma32(hidden[b, k], w3[k, c], a)
-            out[b, c] = a + b3[c]
-
-
-@kernel([_LOGITS_SIGNATURE.format(x="uint8[:, ::1]"),
-         _LOGITS_SIGNATURE.format(x="Array(uint8, 2, 'C', readonly=True)")])
-def _tiny_logits(x: np.ndarray, taps: np.ndarray, s1: np.ndarray, b1: np.ndarray,
-                 w2: np.ndarray, b2: np.ndarray, w3: np.ndarray, b3: np.ndarray
-                 ) -> np.ndarray:
-    """(N, classes) logits of :class:`FastTiny` for (N, 324) uint8 patches.
+@kernel([_HIDDEN_SIGNATURE.format(x="uint8[:, ::1]"),
+         _HIDDEN_SIGNATURE.format(x="Array(uint8, 2, 'C', readonly=True)")])
+def _tiny_hidden(x: np.ndarray, taps: np.ndarray, s1: np.ndarray, b1: np.ndarray,
+                 w2: np.ndarray, b2: np.ndarray) -> np.ndarray:
+    """(N, hidden) ReLU'd hidden layer of :class:`FastTiny` for (N, 324) uint8 patches.
 
     :meth:`FastTiny._numpy_logits`'s arithmetic, in blocks of :data:`_KERNEL_BLOCK`
     patches (the innermost loops run across a block's patches, so they become vector
     instructions).  The integer sums (mean, 2x2 area pool) are exact in any order; the sum
-    of squares is exact and rounded once to float32 (as numpy's einsum's four lanes of at
-    most 81 squares and their total round); each matrix product is a sequence of fused
-    multiply-adds from 0, k ascending (OpenBLAS's AVX-512 sgemm order for the convolution
-    and the hidden layer).  ``taps`` (3, 3, C)
-    is the band's 3x3 kernels (0.25 x conv1).
+    of squares is exact and rounded once to float32 (as numpy einsum's four lanes of at most
+    81 squares and their total round); each matrix product is a sequence of fused
+    multiply-adds from 0, k ascending (OpenBLAS's AVX-512 sgemm order), the same bits on
+    every CPU.  ``taps`` (3, 3, C) is the band's 3x3 kernels (0.25 x conv1).
     """
     n = x.shape[0]
     channels = s1.shape[0]
     hidden = w2.shape[1]
-    out = np.empty((n, w3.shape[1]), np.float32)
+    out = np.empty((n, hidden), np.float32)
     if n == 0:
         return out
     block = min(n, _KERNEL_BLOCK)
@@ -518,13 +505,11 @@ def _tiny_logits(x: np.ndarray, taps: np.ndarray, s1: np.ndarray, b1: np.ndarray
     conv = np.empty((49, block), np.float32)
     feats = np.empty((16 * channels, block), np.float32)
     acc = np.empty((hidden, block), np.float32)
-    layer = np.empty((block, hidden), np.float32)
     for start in range(0, n, block):
         m = min(block, n - start)
         _standardise_pool(x, start, m, inv, shift, pooled)
         _conv_pool(pooled, taps, s1, b1, inv, shift, m, conv, feats)
-        _dense(feats, w2, b2, m, acc, layer)
-        _output(layer, w3, b3, m, out[start:start + m])
+        _dense(feats, w2, b2, m, acc, out[start:start + m])
     return out
 
 
