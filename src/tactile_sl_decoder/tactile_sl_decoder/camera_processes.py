@@ -30,7 +30,7 @@ import time
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from multiprocessing.shared_memory import SharedMemory
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -180,33 +180,47 @@ def _view(block: SharedMemory) -> memoryview:
     return block.buf
 
 
+def camera_half(gray: np.ndarray, detect: Callable[[np.ndarray], Any], grid: GridParams,
+                camera: Any, carry: LabelCarry | None,
+                predict: Callable[[np.ndarray], tuple[np.ndarray, Any]]
+                ) -> tuple[Glyphs, int, tuple[float, float, float]]:
+    """One camera's half of a frame: extract, build the lattice, rectify, classify.
+
+    What a worker (thread or process) does per image: ``detect`` (grey image -> detections)
+    finds the glyphs, whose lattice and rectified centres (``camera``, a CameraCalibration)
+    are kept with them for decoding and stereo; they are labelled with ``predict``, keeping
+    the previous frame's labels where ``carry`` has them.  Returns the glyphs, how many kept
+    a label, and the extraction, lattice (+ rectification) and classification milliseconds.
+    """
+    t0 = time.perf_counter()
+    g = Glyphs.from_detections(detect(gray), gray.shape)
+    t1 = time.perf_counter()
+    g.lattice = image_lattice(g, grid)
+    g.rectified = StereoRig.rectify(camera, np.column_stack([g.u, g.v]).astype(np.float64))
+    t2 = time.perf_counter()
+    carried = label_glyphs([g], [carry], predict)
+    return g, carried, (1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (time.perf_counter() - t2))
+
+
 def _half(image: np.ndarray, job: CameraJob, camera: Any, classifier: Classifier,
           carry: LabelCarry) -> CameraResult:
     # ``image`` lies in shared memory the main process rewrites for the next frame: nothing
     # computed here keeps a view of it (extraction copies what it keeps)
-    """Extract, build the lattice, rectify, classify (the in-process worker's)."""
+    """:func:`camera_half` in a worker process, with the job's settings."""
     if job.threshold is not None:
         classifier.threshold = job.threshold
-    gray = image
-    t0 = time.perf_counter()
-    g = Glyphs.from_detections(extract_symbols(gray, job.extraction), gray.shape)
-    t1 = time.perf_counter()
-    g.lattice = image_lattice(g, job.grid)
-    g.rectified = StereoRig.rectify(camera, np.column_stack([g.u, g.v]).astype(np.float64))
-    t2 = time.perf_counter()
-    match = None
     if job.carry is None:
         carry.reset()
-        carried = label_glyphs([g], [None], classifier.predict)
     else:
         carry.params = job.carry
-        carried = label_glyphs([g], [carry], classifier.predict)
-        if carry.last is not None:
-            match = Match(carry.last.source)
+    g, carried, timings = camera_half(image, lambda gray: extract_symbols(gray, job.extraction),
+                                      job.grid, camera, None if job.carry is None else carry,
+                                      classifier.predict)
+    match = Match(carry.last.source) if job.carry is not None and carry.last is not None \
+        else None
     if not job.patches:
         g.patches = None                    # a quarter of a megabyte less over the pipe
-    return CameraResult(g, carried, match,
-                        (1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (time.perf_counter() - t2)))
+    return CameraResult(g, carried, match, timings)
 
 
 class CameraProcesses:

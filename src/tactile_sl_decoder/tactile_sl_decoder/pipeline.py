@@ -27,14 +27,14 @@ from typing import Any, Callable
 import numpy as np
 
 from tactile_sl_common.camera_info import CameraInfoError
-from tactile_sl_decoder.camera_processes import CameraJob, CameraProcesses
+from tactile_sl_decoder.camera_processes import CameraJob, CameraProcesses, camera_half
 from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry, label_glyphs
 from tactile_sl_decoder.classify.classifier import Classifier
 from tactile_sl_decoder.contract import LABEL_UNKNOWN
 from tactile_sl_decoder.cpu_threads import set_cpu_threads, shorten_switch_interval
 from tactile_sl_decoder.decode.codewords import Codebook, CodewordDecoder, DecodeParams
 from tactile_sl_decoder.decode.grid import GridParams
-from tactile_sl_decoder.decode.joint import decode_jointly, image_lattice
+from tactile_sl_decoder.decode.joint import decode_jointly
 from tactile_sl_decoder.decode.track import StreamMemory
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
@@ -198,24 +198,16 @@ class StereoPipeline:
 
     def _extract_classify(self, job: tuple[np.ndarray, Any, LabelCarry | None]
                           ) -> tuple[Glyphs, int, float, float, float]:
-        """One image's share of a worker: extract, build the lattice, rectify, classify.
+        """One image's share of a worker thread (:func:`camera_half`).
 
-        ``job`` is (grey image, its CameraCalibration, its camera's LabelCarry or None).  The
-        lattice and the rectified pixels of the glyph centres are kept with the glyphs for
-        decoding and stereo.  Returns the glyphs, how many kept the previous frame's label,
-        and the extraction, lattice (k-NN + neighbourhood, + rectification) and
-        classification milliseconds.
+        ``job`` is (grey image, its CameraCalibration, its camera's LabelCarry or None).
+        Returns the glyphs, how many kept the previous frame's label, and the extraction,
+        lattice (+ rectification) and classification milliseconds.
         """
         gray, cam, carry = job
-        t0 = time.perf_counter()
-        det = self._extract(gray)
-        g = Glyphs.from_detections(det, gray.shape)
-        t1 = time.perf_counter()
-        g.lattice = image_lattice(g, self.params.grid)
-        g.rectified = StereoRig.rectify(cam, np.column_stack([g.u, g.v]).astype(np.float64))
-        t2 = time.perf_counter()
-        carried = label_glyphs([g], [carry], self._predict)
-        return g, carried, 1e3 * (t1 - t0), 1e3 * (t2 - t1), 1e3 * (time.perf_counter() - t2)
+        g, carried, (extract_ms, lattice_ms, classify_ms) = camera_half(
+            gray, self._extract, self.params.grid, cam, carry, self._predict)
+        return g, carried, extract_ms, lattice_ms, classify_ms
 
     def classify_pair(self, left: Glyphs, right: Glyphs,
                       carries: tuple[LabelCarry | None, LabelCarry | None] = (None, None)
