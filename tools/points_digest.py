@@ -91,12 +91,13 @@ def record(digests: dict[str, Any], old: dict[str, Any] | None) -> dict[str, Any
     before (the change being recorded did not alter that output here); where it did, the
     other CPU's bytes have most likely changed too, and are dropped until recorded there.
     """
+    old = old or {"frames": {}, "digests": {}}
     frames = {bag: {t: [m[:2] for m in msgs] for t, msgs in topics.items()}
               for bag, topics in digests.items()}
     cpu = cpu_model()
     mine = {bag: {t: [m[2] for m in msgs] for t, msgs in topics.items()}
             for bag, topics in digests.items()}
-    before = (old or {}).get("digests", {}).get(cpu)
+    before = old["digests"].get(cpu)
     by_cpu: dict[str, Any] = {cpu: mine}
 
     def unchanged(bag: str, topic: str) -> bool:
@@ -104,7 +105,7 @@ def record(digests: dict[str, Any], old: dict[str, Any] | None) -> dict[str, Any
             return old["frames"].get(bag, {}).get(topic) == frames[bag].get(topic)
         return before.get(bag, {}).get(topic) == mine[bag].get(topic)
 
-    for other, bags in (old or {}).get("digests", {}).items():
+    for other, bags in old["digests"].items():
         if other != cpu:
             by_cpu[other] = {bag: {t: h for t, h in topics.items() if unchanged(bag, t)}
                              for bag, topics in bags.items() if bag in frames}
