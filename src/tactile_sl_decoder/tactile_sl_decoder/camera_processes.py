@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import multiprocessing
 import pickle
+import signal
 import time
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
@@ -106,25 +107,33 @@ class _Buffers:
 
 def _serve(conn: Connection, weights: str | None, threshold: float | None,
            cpu_threads: int) -> None:
-    """The worker's loop: one camera's frames, in order, until the pipe closes."""
+    """The worker's loop: one camera's frames, in order, until the pipe closes.
+
+    The main process alone decides when its workers stop (a "stop", or its end of the pipe
+    closing when it ends), so a Ctrl-C in the terminal, which reaches the whole process
+    group, is ignored here; and a main process that ended while this one was starting or
+    computing ends this one quietly, without a traceback.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     set_cpu_threads(cpu_threads)
     try:
         classifier = Classifier.load(weights, threshold)
         _warm_up(classifier)
     except Exception as exc:         # reported by the main process (poll_ready)
-        conn.send(("error", exc))
+        _send(conn, ("error", exc))
         return
     carry = LabelCarry(CarryParams())
     camera: Any = None
     buffers = _Buffers()
     freeze_long_lived()        # no full collection of the imports between two frames
-    conn.send(("ready", None))
+    if not _send(conn, ("ready", None)):
+        return
     frames = 0
     try:
         while True:
             try:
                 kind, payload = conn.recv()
-            except (EOFError, OSError, KeyboardInterrupt):
+            except (EOFError, OSError):
                 return
             if kind == "stop":
                 return
@@ -134,13 +143,24 @@ def _serve(conn: Connection, weights: str | None, threshold: float | None,
                 carry.reset()
             else:
                 job, image_name, result_name = payload
-                conn.send(_answer(job, buffers.get(image_name), buffers.get(result_name),
-                                  camera, classifier, carry))
+                if not _send(conn, _answer(job, buffers.get(image_name),
+                                           buffers.get(result_name), camera, classifier,
+                                           carry)):
+                    return
                 frames += 1
                 if frames == 1:        # and what the first frame set up (compiled kernels)
                     freeze_long_lived(collect=False)
     finally:
         buffers.close()
+
+
+def _send(conn: Connection, message: tuple[str, Any]) -> bool:
+    """Send ``message`` to the main process; False if it has gone (its end closed)."""
+    try:
+        conn.send(message)
+    except (BrokenPipeError, ConnectionResetError, EOFError):
+        return False
+    return True
 
 
 def _warm_up(classifier: Classifier) -> None:

@@ -76,3 +76,50 @@ def test_workers_report_ready_after_their_warm_up():
         procs.wait_ready()                       # once is enough: no second handshake
     finally:
         procs.close()
+
+
+def test_a_worker_whose_main_process_went_while_it_started_ends_quietly(capfd):
+    """The main process ended (its end of the pipe closed) during the warm-up: no traceback.
+
+    A decoder stopped within its first seconds did this; the worker's "ready" then hit a
+    broken pipe and printed a traceback into the node's log.
+    """
+    import multiprocessing
+
+    from tactile_sl_decoder.camera_processes import _serve
+
+    context = multiprocessing.get_context("spawn")
+    mine, theirs = context.Pipe()
+    proc = context.Process(target=_serve, args=(theirs, None, None, 1), daemon=True)
+    proc.start()
+    theirs.close()
+    mine.close()                              # long before its warm-up ends
+    proc.join(timeout=120.0)
+    assert proc.exitcode == 0
+    assert "Traceback" not in capfd.readouterr().err
+
+
+def test_ctrl_c_in_the_terminal_leaves_the_workers_to_the_main_process():
+    """SIGINT reaches the whole process group; the workers ignore it and go on serving."""
+    import os
+    import signal
+    import time
+
+    frames = bag_frames(BAGS / "two_contacts.mcap")
+    frame = next(iter(frames))
+    left, right = to_gray(frame.left_image), to_gray(frame.right_image)
+    pattern = PatternSpec.load(None)
+    here = StereoPipeline(pattern, None, PipelineParams(threads=1))
+    there = StereoPipeline(pattern, None, PipelineParams(processes=True))
+    try:
+        for pipe in (here, there):                                # workers ready
+            pipe.process(left, right, frame.left_info, frame.right_info)
+        expected = here.process(left, right, frame.left_info, frame.right_info)
+        for pid in there.worker_pids:
+            os.kill(pid, signal.SIGINT)
+        time.sleep(0.5)
+        got = there.process(left, right, frame.left_info, frame.right_info)
+        assert got.points.tobytes() == expected.points.tobytes()
+    finally:
+        here.close()
+        there.close()
