@@ -18,3 +18,8 @@ def test_every_kernel_module_is_warmed_at_setup():
     assert defined == set(jit.KERNEL_MODULES)
     for kernel in jit.compiled_kernels():   # compiled eagerly, without fastmath
         assert kernel.signatures and not kernel.targetoptions.get("fastmath")
+
+
+def test_the_parallel_warm_up_groups_hold_every_kernel_module_once():
+    grouped = [name for group in jit.WARM_GROUPS for name in group]
+    assert sorted(grouped) == sorted(jit.KERNEL_MODULES)
