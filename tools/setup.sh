@@ -9,7 +9,7 @@ command -v "$PY" >/dev/null 2>&1 || PY=python3
 REQ="$ROOT/tools/requirements.txt"
 STAMP="$VENV/.tactile_sl_requirements.sha256"
 
-log() { printf '[setup] %s\n' "$*"; }
+log() { printf '[setup] %s (at %d s)\n' "$*" "$SECONDS"; }
 
 # Serialise concurrent setups/builds of this checkout (parallel shells, helpers).
 exec 9>"$ROOT/.setup.lock"
