@@ -19,6 +19,10 @@ test.
     tactile-sl synth bags/sequence_scenes.yaml -o /tmp/seq  # a 60 Hz press (45 frames)
     python tools/bench_graph.py --bag /tmp/seq/press_60hz.mcap --rate 1 --seconds 60
 
+With ``--sensors N`` the decoders get what ``sensors.launch.py`` gives N sensors on this
+machine (:func:`~tactile_sl_decoder.nodes.sensors.decoder_overrides`: in process on one
+thread where there are fewer than two cores per sensor); ``--param`` overrides it.
+
 Also printed: CPU use of every decoder and replay process over the run (per cent of one
 CPU) and their resident memory when the first cloud arrives and at the end, each with its
 descendants (the decoder's camera worker processes).
@@ -43,6 +47,7 @@ from sensor_msgs.msg import PointCloud2
 
 from tactile_sl_common.bag_io import stamp_to_ns
 from tactile_sl_decoder.frames import count_bag_frames
+from tactile_sl_decoder.nodes.sensors import decoder_overrides
 
 REPO = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
@@ -101,6 +106,9 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
         args.loops = max(1, math.ceil(args.seconds * bag_hz * args.rate / frames_per_pass))
     expected = frames_per_pass * args.loops
     spaces = ["/tactile"] if args.sensors == 1 else [f"/sensor{i}" for i in range(args.sensors)]
+    # what sensors.launch.py gives N decoders on this machine (--param overrides it)
+    shared = [] if args.chain else [f"{k}:={str(v).lower()}" for k, v in
+                                    decoder_overrides(args.sensors, os.cpu_count()).items()]
 
     context = Context()
     rclpy.init(context=context, domain_id=args.domain_id)
@@ -133,7 +141,7 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
         for ns in spaces:
             tag = ns.strip("/").replace("/", "_")
             decoder_args = ["-r", f"__ns:={ns}", "-p", "publish_symbols:=false"]
-            for item in args.param:
+            for item in [*shared, *args.param]:
                 decoder_args += ["-p", item]
             if args.chain:
                 decoder_args += ["-p", "input:=symbols",
@@ -198,6 +206,9 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
           f"frames of {args.bag.name} each at {bag_hz * args.rate:.0f} Hz, Fast DDS profile "
           f"{os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE') or 'none'}, load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+    if shared or args.param:
+        print(f"decoder parameters: {' '.join([*shared, *args.param])}"
+              f"{' (the first as sensors.launch.py sets them here)' if shared else ''}")
     received = 0
     for ns in spaces:
         received += len(latency_ms[ns])

@@ -30,16 +30,21 @@ def _one(**entry):
     return base
 
 
-def test_decoders_use_one_thread_each_where_cores_are_fewer_than_two_per_sensor():
+def _workers(sensors):
+    """Each decoder's camera_processes and threads overrides (None: not set)."""
+    return [(s.decoder.get("camera_processes"), s.decoder.get("threads")) for s in sensors]
+
+
+def test_decoders_run_in_process_on_one_thread_where_cores_are_fewer_than_two_per_sensor():
     two = {"sensors": [_one(), _one(namespace="b", left_device="/dev/v4l/by-id/l2",
                                     right_device="/dev/v4l/by-id/r2")]}
-    assert [s.decoder.get("threads") for s in parse_sensors(two, cpus=2)] == [1, 1]
-    assert [s.decoder.get("threads") for s in parse_sensors(two, cpus=4)] == [None, None]
-    assert [s.decoder.get("threads") for s in parse_sensors(two, cpus=None)] == [None, None]
-    (s,) = parse_sensors({"sensors": [_one()]}, cpus=2)
-    assert "threads" not in s.decoder
-    two["sensors"][0]["decoder"] = {"threads": 2}          # the entry's own setting wins
-    assert [s.decoder.get("threads") for s in parse_sensors(two, cpus=2)] == [2, 1]
+    assert _workers(parse_sensors(two, cpus=2)) == [(False, 1), (False, 1)]
+    assert _workers(parse_sensors(two, cpus=4)) == [(None, None), (None, None)]
+    assert _workers(parse_sensors(two, cpus=None)) == [(None, None), (None, None)]
+    assert _workers(parse_sensors({"sensors": [_one()]}, cpus=2)) == [(None, None)]
+    two["sensors"][0]["decoder"] = {"threads": 2}          # the entry's own settings win
+    two["sensors"][1]["decoder"] = {"camera_processes": True}
+    assert _workers(parse_sensors(two, cpus=2)) == [(False, 2), (True, 1)]
 
 
 def test_overrides_and_side_by_side():

@@ -14,8 +14,8 @@ One entry per sensor (config/sensors.yaml)::
 :func:`load_sensors` checks the list (names, duplicates, device paths) and returns, per
 sensor, the namespace and the parameter overrides of its ``stereo_camera`` and ``decoder``
 nodes, so the launch file only turns them into nodes. Where the machine has fewer than two
-cores per sensor, each decoder runs its two images on one thread (``threads`` 1, unless the
-entry sets it; :func:`decoder_threads`).
+cores per sensor, each decoder runs its two images in process on one thread
+(``camera_processes`` false, ``threads`` 1, unless the entry sets them; :func:`decoder_overrides`).
 """
 from __future__ import annotations
 
@@ -47,27 +47,34 @@ class SensorConfig:
     decoder: dict[str, Any] = field(default_factory=dict)
 
 
-def decoder_threads(sensors: int, cpus: int | None) -> int | None:
-    """The decoders' ``threads`` for ``sensors`` of them on ``cpus`` cores (None: default).
+SHARED_CORE_DECODER = {"camera_processes": False, "threads": 1}
+"""A decoder's settings where it shares its cores with other sensors' decoders."""
 
-    None leaves the node's default, 2. A decoder's second worker thread shortens a frame
-    only when a core is free for it; with fewer than two cores per decoder the decoders
-    contend for the cores (and each for its GIL) and the second thread costs more than it
-    gains. Measured with two sensors at 30 Hz on a 2-core machine (tools/bench_graph.py
-    --sensors 2, 60 s, two rounds alternating, 2026-12-02): 669-858 frames dropped of 1806
-    per sensor (mean 760) with threads 1, 850-913 (mean 883) with threads 2; p99 latency
-    105-134 against 109-131 ms (no difference).
+
+def decoder_overrides(sensors: int, cpus: int | None) -> dict[str, Any]:
+    """The decoders' parameters for ``sensors`` of them on ``cpus`` cores ({}: the defaults).
+
+    A decoder's camera worker processes (or its second thread) shorten a frame only when a
+    core is free for each image; with fewer than two cores per decoder the decoders contend
+    for the cores, and the handing over of images, the workers' wake-ups and their pickled
+    answers cost more than the parallel images gain: each decoder then runs its frame in
+    process on one thread (:data:`SHARED_CORE_DECODER`).  Measured with two sensors at
+    30 Hz on a 2-vCPU AMD EPYC VM (tools/bench_graph.py --sensors 2, 60 s, two rounds
+    alternating, 2026-12-03, load average 3.7-4.7): 285-456 frames dropped of 1806 per
+    sensor with camera processes, 112-156 in process on one thread; p99 stamp-to-wrench
+    119-133 against 95-108 ms; 855-860 against 333-344 MB resident per decoder.  (Before
+    the camera processes, 2026-12-02: threads 1 dropped 669-858 frames, threads 2 850-913.)
     """
     if cpus is None or 2 * sensors <= cpus:
-        return None
-    return 1
+        return {}
+    return dict(SHARED_CORE_DECODER)
 
 
 def parse_sensors(doc: Any, source: str = "sensors", cpus: int | None = -1
                   ) -> list[SensorConfig]:
     """Sensor configurations from the parsed YAML document.
 
-    ``cpus``: the cores the decoders share (-1: this machine's, None: leave ``threads``).
+    ``cpus``: the cores the decoders share (-1: this machine's, None: leave the decoders' defaults).
     """
     if not isinstance(doc, dict) or not isinstance(doc.get("sensors"), list) \
             or not doc["sensors"]:
@@ -116,16 +123,15 @@ def parse_sensors(doc: Any, source: str = "sensors", cpus: int | None = -1
     dup = sorted({d for d in devices if devices.count(d) > 1})
     if dup:
         raise SensorsFileError(f"{source}: device used twice: {dup}")
-    _set_decoder_threads(out, os.cpu_count() if cpus == -1 else cpus)
+    _set_decoder_overrides(out, os.cpu_count() if cpus == -1 else cpus)
     return out
 
 
-def _set_decoder_threads(sensors: list[SensorConfig], cpus: int | None) -> None:
-    """Each decoder's ``threads`` from :func:`decoder_threads`, unless its entry sets it."""
-    threads = decoder_threads(len(sensors), cpus)
-    if threads is not None:
+def _set_decoder_overrides(sensors: list[SensorConfig], cpus: int | None) -> None:
+    """Each decoder's :func:`decoder_overrides`, except what its entry sets itself."""
+    for key, value in decoder_overrides(len(sensors), cpus).items():
         for sensor in sensors:
-            sensor.decoder.setdefault("threads", threads)
+            sensor.decoder.setdefault(key, value)
 
 
 def load_sensors(path: str | Path) -> list[SensorConfig]:
