@@ -193,11 +193,8 @@ class TractionSolver:
         self.cols = self.cells % self.shape[1]
         n = len(self.cells)
         kernel = cell_kernel(elastomer, pitch, *self.shape)
-        dr = self.rows[:, None] - self.rows[None, :] + self.shape[0] - 1
-        dc = self.cols[:, None] - self.cols[None, :] + self.shape[1] - 1
-        # G[3i + a, 3j + b] = u_a at cell i per unit f_b on cell j
-        g = kernel[dr, dc].transpose(0, 2, 1, 3).reshape(3 * n, 3 * n)
-        self._g32 = g.astype(np.float32)      # forward model: fit residuals (calibration)
+        self._kernel = kernel
+        self._g32_made: np.ndarray | None = None
         self._grid_index = np.full(self.shape, -1, np.int64)
         self._grid_index[self.rows, self.cols] = np.arange(n)
         self.last_support = np.zeros(n, bool)
@@ -214,10 +211,31 @@ class TractionSolver:
             if stored is not None:
                 self._install(stored)
                 return
+        g = self._forward()
+        self._g32_made = g.astype(np.float32)
         self._install(self._invert(g, x, y))
         self.area_fraction = self._area_fraction(g, x, y, pitch)
         if cache is not None and key is not None:
             cache.store(key, self._stored())
+
+    def _forward(self) -> np.ndarray:
+        """G (3N, 3N) float64: G[3i + a, 3j + b] = u_a at cell i per unit f_b on cell j."""
+        n = len(self.cells)
+        dr = self.rows[:, None] - self.rows[None, :] + self.shape[0] - 1
+        dc = self.cols[:, None] - self.cols[None, :] + self.shape[1] - 1
+        return self._kernel[dr, dc].transpose(0, 2, 1, 3).reshape(3 * n, 3 * n)
+
+    @property
+    def _g32(self) -> np.ndarray:
+        """G in float32, the forward model of fit residuals (calibration, noisy pads).
+
+        Made on first use: an inversion read back from the cache needs no G, and building
+        it (38 MB for 728 cells) took half of a start's reference preparation, in the
+        thread beside the node's frames.
+        """
+        if self._g32_made is None:
+            self._g32_made = self._forward().astype(np.float32)
+        return self._g32_made
 
     def _invert(self, g: np.ndarray, x: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
         """The regularised inverses (resultant, map and, if wanted, support rows).
