@@ -53,6 +53,7 @@ from tactile_sl_decoder.symbol_array import fill_message, from_message
 from tactile_sl_decoder.touch.driver import TouchFrame
 from tactile_sl_decoder.touch.sensor import load_sensor
 from tactile_sl_decoder.touch.stage import TouchParams
+from tactile_sl_decoder.warm_up import warm_up
 
 try:
     from tactile_sl_msgs.msg import SymbolArray
@@ -175,6 +176,13 @@ class DecoderNode(Node):
             return
         self.destroy_timer(self._start_timer)
         self._start_timer = None
+        if self.input_mode == "images":
+            # the node's own decode, stereo and outlier code meet their first frame now,
+            # not with the first camera frame (warm_up.py)
+            started = time.perf_counter()
+            points = warm_up(self.pipeline)
+            self.get_logger().debug(f"warm-up frame: {points} points in "
+                                    f"{1e3 * (time.perf_counter() - started):.0f} ms")
         for side in ("left", "right"):
             self.create_subscription(
                 Image, f"{side}/image_raw",
