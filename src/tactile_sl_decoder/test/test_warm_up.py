@@ -43,3 +43,11 @@ def test_frames_after_the_warm_up_are_the_bytes_of_a_fresh_pipeline():
     finally:
         fresh.close()
         warmed.close()
+
+
+def test_an_alphabet_without_default_glyphs_is_a_clear_error():
+    """What the node catches (and logs): it then subscribes without the warm-up frame."""
+    import numpy as np
+
+    with pytest.raises(ValueError, match="no default glyph set"):
+        pattern_pair(np.zeros((6, 6), np.uint8), symbols=40)

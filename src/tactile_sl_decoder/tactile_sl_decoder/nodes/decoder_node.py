@@ -180,9 +180,13 @@ class DecoderNode(Node):
             # the node's own decode, stereo and outlier code meet their first frame now,
             # not with the first camera frame (warm_up.py)
             started = time.perf_counter()
-            points = warm_up(self.pipeline)
-            self.get_logger().debug(f"warm-up frame: {points} points in "
-                                    f"{1e3 * (time.perf_counter() - started):.0f} ms")
+            try:
+                points = warm_up(self.pipeline)
+                self.get_logger().debug(f"warm-up frame: {points} points in "
+                                        f"{1e3 * (time.perf_counter() - started):.0f} ms")
+            except Exception as exc:   # best effort: then the first camera frame warms up
+                self.get_logger().warning(f"warm-up frame skipped ({type(exc).__name__}: "
+                                          f"{exc}); the first camera frame takes longer")
         for side in ("left", "right"):
             self.create_subscription(
                 Image, f"{side}/image_raw",
