@@ -358,32 +358,6 @@ class FastTiny:
         return out
 
 
-def _check_sample(rng: np.random.Generator, n: int) -> np.ndarray:
-    """(n, 18, 18) uint8 patches that exercise :func:`_tiny_hidden`'s arithmetic, shuffled.
-
-    A quarter uniform noise, a quarter bright (200..255: sums of squares past 2^24, where
-    float32 sums round), a few flat, the rest glyph-like: a dark disc, ring or bar on a
-    bright background with noise and a gradient, as the sensor's glyphs are.
-    """
-    out = rng.integers(0, 256, (n, PATCH_SIZE, PATCH_SIZE)).astype(np.float64)
-    quarter = n // 4
-    out[quarter:2 * quarter] = rng.integers(200, 256, (quarter, PATCH_SIZE, PATCH_SIZE))
-    out[2 * quarter:2 * quarter + 4] = np.array([0, 77, 255, 254])[:, None, None]
-    yy, xx = np.mgrid[0:PATCH_SIZE, 0:PATCH_SIZE] - (PATCH_SIZE - 1) / 2.0
-    glyphs = out[2 * quarter + 4:]
-    k = len(glyphs)
-    cx, cy = rng.uniform(-2, 2, (2, k, 1, 1))
-    radius = np.hypot(xx - cx, yy - cy)
-    shape = rng.integers(0, 3, k)[:, None, None]
-    size = rng.uniform(2.5, 6.0, (k, 1, 1))
-    ink = np.where(shape == 0, radius < size, np.where(
-        shape == 1, np.abs(radius - size) < 1.2, (np.abs(yy - cy) < 1.5) & (np.abs(xx) < size)))
-    background = rng.uniform(120, 255, (k, 1, 1)) + rng.uniform(-3, 3, (k, 1, 1)) * xx
-    dark = rng.uniform(0, 90, (k, 1, 1))
-    glyphs[:] = np.where(ink, dark, background) + rng.normal(0, 4, glyphs.shape)
-    return np.clip(np.rint(out[rng.permutation(n)]), 0, 255).astype(np.uint8)
-
-
 _HIDDEN_SIGNATURE = ("float32[:, ::1]({x}, float32[:, :, ::1], float32[::1], float32[::1], "
                      "float32[:, ::1], float32[::1])")
 
