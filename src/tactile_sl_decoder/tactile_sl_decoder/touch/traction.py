@@ -212,7 +212,6 @@ class TractionSolver:
                 self._install(stored)
                 return
         g = self._forward()
-        self._g32_made = g.astype(np.float32)
         self._install(self._invert(g, x, y))
         self.area_fraction = self._area_fraction(g, x, y, pitch)
         if cache is not None and key is not None:
