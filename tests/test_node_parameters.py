@@ -33,11 +33,14 @@ class Client(Probe):
     def __init__(self, domain: int) -> None:
         super().__init__("param_test_client", domain)
 
-    def wait(self, future, timeout: float = 20.0):
+    def _answered(self, future, timeout: float) -> bool:
         deadline = time.monotonic() + timeout
         while not future.done() and time.monotonic() < deadline:
             self.executor.spin_once(timeout_sec=0.05)
-        assert future.done(), "no answer from the node's parameter services"
+        return future.done()
+
+    def wait(self, future, timeout: float = 20.0):
+        assert self._answered(future, timeout), "no answer from the node's parameter services"
         return future.result()
 
     def client(self, fqn: str, timeout: float = 40.0) -> AsyncParameterClient:
@@ -49,7 +52,15 @@ class Client(Probe):
         return c
 
     def get(self, c: AsyncParameterClient, names: list[str]) -> dict:
-        res = self.wait(c.get_parameters(names))
+        # A read is asked again if its answer is lost: a node still starting (a decoder
+        # spawning its workers on two busy cores) can answer before the middleware has
+        # matched this client's response reader ("failed to send response (timeout)")
+        future = c.get_parameters(names)
+        for _ in range(2):
+            if self._answered(future, 10.0):
+                break
+            future = c.get_parameters(names)
+        res = self.wait(future)
         return {n: parameter_value_to_python(v) for n, v in zip(names, res.values)}
 
     def set(self, c: AsyncParameterClient, **values) -> list:
