@@ -1,26 +1,31 @@
-"""Each camera's images' half of a stereo frame in a process of its own (no rclpy).
+"""The right camera's half of each stereo frame in a process of its own (no rclpy).
 
 The pipeline's work per frame is many small numpy and Python steps that hold the
 interpreter lock: two threads decoding two images share one core's worth of it (two
 threads running two independent pipelines got 0.86x the throughput of one; two processes
 1.93x).  So a live node extracts, finds the k nearest neighbours of, rectifies and
-classifies each camera's glyphs in a worker process per camera, while the main process
-decodes, pairs, triangulates and runs the touch stage.  Each worker keeps its camera's
-label carry (the labels kept from its previous frame), exactly as the in-process pipeline
-keeps it per camera, so the results are the same bytes (test).
+classifies the right camera's glyphs in a worker process, while its own process does the
+same for the left camera meanwhile (:func:`camera_half`, with its own label carry and
+classifier), then decodes, pairs, triangulates and runs the touch stage.  The worker keeps
+its camera's label carry, exactly as the in-process pipeline keeps it per camera, so the
+results are the same bytes (test).  Until 2026-12-03 both cameras had a worker and the
+node's process waited for them: each hand-off (wake-up, pickling) cost ~0.3 ms each way and
+the second worker started its frame ~1 ms after the first on the 2-core VM, 2.4 ms a frame
+in all; one worker and the left half here took 8.6 instead of 11.2 ms a frame (two_contacts,
+same bytes).
 
-Images go to a worker through shared memory and its glyphs come back pickled through shared
-memory too (about 0.3 MB a stereo pair in all; through a pipe, whose 64 kB buffer splits such
-a message into a handful of wake-ups on each side, the transfers cost ~5 ms a frame); the
+The image goes to the worker through shared memory and its glyphs come back pickled
+through shared memory too (about 0.15 MB a frame; through a pipe, whose 64 kB buffer splits
+such a message into a handful of wake-ups on each side, the transfers cost ~2.5 ms); the
 pipe carries only short messages.  Settings travel with every frame, so a live change
 applies to the next frame as in the process; the camera calibration is sent when it changes.
-Workers are started with ``spawn`` (a fork of a process with DDS threads is unsafe), take
-about a second to start, end when the pipe closes, and their errors come back as the
-frame's errors.  Before it reports ready, each worker runs two synthetic frames through its
-code (a lattice of ink discs: extraction, patches, classification, the label carry), so that
-the first real frame finds every first-call cost paid; :meth:`CameraProcesses.poll_ready`
-tells when both are (a live node subscribes to images only then: no frame waits for a
-starting worker), and :meth:`~CameraProcesses.run` waits for it.
+The worker is started with ``spawn`` (a fork of a process with DDS threads is unsafe), takes
+about a second to start, ends when the pipe closes, and its errors come back as the frame's
+errors.  Before it reports ready, it runs two synthetic frames through its code (a lattice
+of ink discs: extraction, patches, classification, the label carry), so that the first real
+frame finds every first-call cost paid; :meth:`CameraProcesses.poll_ready` tells when it is
+(a live node subscribes to images only then, after running a frame through its own half:
+no frame waits for a starting worker), and :meth:`~CameraProcesses.run` waits for it.
 """
 from __future__ import annotations
 
@@ -244,14 +249,24 @@ def _half(image: np.ndarray, job: CameraJob, camera: Any, classifier: Classifier
 
 
 class CameraProcesses:
-    """Two worker processes, one per camera; :meth:`run` gives both halves of a frame."""
+    """Both cameras' halves of a frame: the right camera's in a worker process, the left's here.
+
+    :meth:`run` sends the right image to its worker and meanwhile runs the left half in the
+    calling process, with the caller's label carry and classifier, then collects the right.
+    One hand-off a frame instead of two: on the 2-core VM a second worker started its frame
+    about 1 ms after the first, and each hand-off cost ~0.3 ms each way (measured with
+    ``tools/bench_pipeline.py --processes``: see docs/decoder.md).
+    """
+
+    SIDES = ("right",)
+    """The cameras that have a worker process (the left camera's half runs in the caller)."""
 
     def __init__(self, weights: str | None, threshold: float | None,
                  cpu_threads: int = 1) -> None:
         context = multiprocessing.get_context("spawn")
         self._conns: list[Connection] = []
         self._procs: list[Any] = []
-        for side in ("left", "right"):
+        for side in self.SIDES:
             mine, theirs = context.Pipe()
             proc = context.Process(target=_serve, args=(theirs, weights, threshold,
                                                         cpu_threads),
@@ -260,11 +275,10 @@ class CameraProcesses:
             theirs.close()
             self._conns.append(mine)
             self._procs.append(proc)
-        self._cameras: list[Any] = [None, None]
-        self._images: list[SharedMemory | None] = [None, None]
-        self._results = [SharedMemory(create=True, size=RESULT_BYTES) for _ in range(2)]
-        self._started = [False, False]     # each worker's "ready" received
-
+        self._camera: Any = None               # the worker's camera calibration, as sent
+        self._image: SharedMemory | None = None
+        self._result: SharedMemory | None = SharedMemory(create=True, size=RESULT_BYTES)
+        self._started = [False] * len(self._procs)   # each worker's "ready" received
     def wait_ready(self, timeout: float = 60.0) -> None:
         """Wait until both workers have started and warmed up (RuntimeError if one failed).
 
@@ -279,7 +293,7 @@ class CameraProcesses:
 
     @property
     def pids(self) -> list[int]:
-        """The worker processes' ids (left, right)."""
+        """The worker processes' ids (one per camera of :attr:`SIDES`)."""
         return [int(p.pid) for p in self._procs]
 
     def poll_ready(self, timeout: float = 0.0) -> bool:
@@ -305,45 +319,55 @@ class CameraProcesses:
         return all(self._started)
 
     def run(self, images: tuple[np.ndarray, np.ndarray], cameras: tuple[Any, Any],
-            jobs: tuple[CameraJob, CameraJob]) -> tuple[CameraResult, CameraResult]:
-        """Both cameras' halves of one frame, computed side by side."""
+            jobs: tuple[CameraJob, CameraJob], classifier: Classifier,
+            left_carry: LabelCarry) -> tuple[CameraResult, CameraResult]:
+        """Both cameras' halves of one frame, computed side by side.
+
+        The left half runs here with ``classifier`` and ``left_carry`` (the caller's, as in
+        process), exactly as the worker runs the right one with its own.  An error of either
+        half is raised once both have ended (the worker's pipe stays in step).
+        """
         self.wait_ready()
-        for i, conn in enumerate(self._conns):
-            if cameras[i] is not self._cameras[i]:
-                conn.send(("camera", cameras[i]))
-                self._cameras[i] = cameras[i]
-            block = self._image_block(i, images[i].nbytes)
-            np.copyto(np.ndarray(images[i].shape, np.uint8, buffer=_view(block)), images[i])
-            conn.send(("frame", (jobs[i], block.name, self._results[i].name)))
-        out: list[Any] = []
+        if self._result is None:
+            raise RuntimeError("the camera processes were closed")
+        conn, proc, result = self._conns[0], self._procs[0], self._result
+        if cameras[1] is not self._camera:
+            conn.send(("camera", cameras[1]))
+            self._camera = cameras[1]
+        block = self._image_block(images[1].nbytes)
+        np.copyto(np.ndarray(images[1].shape, np.uint8, buffer=_view(block)), images[1])
+        conn.send(("frame", (jobs[1], block.name, result.name)))
+        left: CameraResult | None = None
         error: BaseException | None = None
-        for conn, proc, result in zip(self._conns, self._procs, self._results):
-            try:                                # both replies, before raising
-                status, value = conn.recv()
-            except (EOFError, OSError):
-                raise RuntimeError(f"the {proc.name} worker process ended (exit code "
-                                   f"{proc.exitcode})") from None
-            if status == "error":
-                error = error or value
-            elif error is None:                 # unpickled while the other camera works
-                out.append(pickle.loads(value if status == "inline"
-                                        else _view(result)[:value]))
+        try:
+            left = _half(images[0], jobs[0], cameras[0], classifier, left_carry)
+        except Exception as exc:          # raised once the worker has answered
+            error = exc
+        try:
+            status, value = conn.recv()
+        except (EOFError, OSError):
+            raise RuntimeError(f"the {proc.name} worker process ended (exit code "
+                               f"{proc.exitcode})") from None
+        if status == "error":
+            error = error or value
         if error is not None:
             raise error
-        return out[0], out[1]
+        assert left is not None
+        return left, pickle.loads(value if status == "inline" else _view(result)[:value])
 
-    def _image_block(self, i: int, size: int) -> SharedMemory:
-        """Camera ``i``'s image block, made (again) when an image does not fit."""
-        block = self._images[i]
+    def _image_block(self, size: int) -> SharedMemory:
+        """The worker's image block, made (again) when an image does not fit."""
+        block = self._image
         if block is None or block.size < size:
             if block is not None:
                 block.close()
                 block.unlink()
-            block = self._images[i] = SharedMemory(create=True, size=size)
+            block = self._image = SharedMemory(create=True, size=size)
         return block
 
     def forget(self) -> None:
-        """Nothing carried to the next frame (each worker forgets its camera's labels)."""
+        """Nothing carried to the next frame (the worker forgets its camera's labels; the
+        caller forgets the left camera's)."""
         for conn in self._conns:
             conn.send(("forget", None))
 
@@ -360,8 +384,8 @@ class CameraProcesses:
             if proc.is_alive():
                 proc.terminate()
         self._conns, self._procs = [], []
-        for block in [*self._images, *self._results]:
+        for block in (self._image, self._result):
             if block is not None:
                 block.close()
                 block.unlink()
-        self._images, self._results = [None, None], []
+        self._image = self._result = None

@@ -359,7 +359,7 @@ class StereoPipeline:
 
     def _in_processes(self, left_gray: np.ndarray, right_gray: np.ndarray, rig: StereoRig
                       ) -> tuple[tuple[Glyphs, Glyphs], int, tuple[Any, Any], list[float]]:
-        """Both images' halves in the camera worker processes (camera_processes.py)."""
+        """The right image's half in its worker process, the left's here (camera_processes.py)."""
         assert self._procs is not None
         classifier = self.load_classifier()       # here too: rescue classifies
         p = self.params
@@ -369,7 +369,7 @@ class StereoPipeline:
         jobs = tuple(CameraJob(gray.shape, p.extraction, p.grid, carry, classifier.threshold,
                                self.keep_patches) for gray in (left_gray, right_gray))
         rl, rr = self._procs.run((left_gray, right_gray), (rig.left, rig.right),
-                                 (jobs[0], jobs[1]))
+                                 (jobs[0], jobs[1]), classifier, self.memory.carries[0])
         ms = [max(a, b) for a, b in zip(rl.timings_ms, rr.timings_ms)]
         return (rl.glyphs, rr.glyphs), rl.carried + rr.carried, (rl.match, rr.match), ms
 

@@ -41,10 +41,14 @@ def test_the_same_points_cells_and_carry_as_in_process():
         assert a.carried == b.carried == 0
         there.keep_patches = True
         assert there.process(*frames[4]).left.patches is not None
-        # an error in a worker is raised here, and the next frame goes on
-        with pytest.raises(AttributeError):
-            there._procs.run((frames[0][0], frames[0][1]), (None, None),
-                             (_job(frames[0][0]), _job(frames[0][1])))
+        # an error of either half (the worker's, or the left one's here) is raised here
+        # once both have ended, and the next frame goes on
+        rig = there.rig(frames[0][2], frames[0][3])
+        for cameras in ((rig.left, None), (None, rig.right)):
+            with pytest.raises(AttributeError):
+                there._procs.run((frames[0][0], frames[0][1]), cameras,
+                                 (_job(frames[0][0]), _job(frames[0][1])),
+                                 there.load_classifier(), there.memory.carries[0])
         after = there.process(*frames[5]).points.tobytes()
         assert after == here.process(*frames[5]).points.tobytes()
     finally:
@@ -58,7 +62,7 @@ def test_a_worker_that_cannot_start_is_reported_with_why(tmp_path):
 
     procs = CameraProcesses(str(tmp_path / "missing.pt"), None)
     try:
-        with pytest.raises(RuntimeError, match=r"left camera worker process failed to start.*"
+        with pytest.raises(RuntimeError, match=r"right camera worker process failed to start.*"
                                                r"missing\.pt"):
             procs.wait_ready(timeout=60.0)
     finally:
@@ -66,7 +70,7 @@ def test_a_worker_that_cannot_start_is_reported_with_why(tmp_path):
 
 
 def test_workers_report_ready_after_their_warm_up():
-    """Both workers answer ready (two synthetic frames run); frames then go through."""
+    """The worker answers ready (two synthetic frames run); frames then go through."""
     from tactile_sl_decoder.camera_processes import CameraProcesses
 
     procs = CameraProcesses(None, None)
