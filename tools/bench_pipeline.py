@@ -12,9 +12,10 @@ and the end-to-end accuracy table (coverage, wrong cells, 3-D error against grou
 With --threads 2 (the default) each image runs in its own worker thread: extract, lattice
 (k-NN search and neighbourhood of the glyphs + rectification of their centres) and classify
 are then the slower worker's times, which overlap; "workers" is the wall time of that part.
-With --processes each image's worker is a process of its own, as in the live decoder node
-(no interpreter lock shared between the two images; the images go through shared memory
-and the glyphs come back pickled), and cpu+touch counts the workers' CPU time too.
+With --processes the right image's worker is a process of its own while this process does
+the left image's, as in the live decoder node (no interpreter lock shared between the two
+images; the image goes through shared memory and its glyphs come back pickled), and
+cpu+touch counts the worker's CPU time too.
 With touch outputs (the default; --no-touch leaves them out) the touch stage runs after
 every frame as in the node and replay ("touch", of which "slip" is the slip estimate,
 "total+touch"; "cpu+touch" is the process CPU time of both). In the same run and on the same

@@ -280,7 +280,7 @@ class CameraProcesses:
         self._result: SharedMemory | None = SharedMemory(create=True, size=RESULT_BYTES)
         self._started = [False] * len(self._procs)   # each worker's "ready" received
     def wait_ready(self, timeout: float = 60.0) -> None:
-        """Wait until both workers have started and warmed up (RuntimeError if one failed).
+        """Wait until the workers have started and warmed up (RuntimeError if one failed).
 
         :meth:`run` waits for it too.
         """
@@ -297,7 +297,7 @@ class CameraProcesses:
         return [int(p.pid) for p in self._procs]
 
     def poll_ready(self, timeout: float = 0.0) -> bool:
-        """Whether both workers are ready, waiting at most ``timeout`` s for each answer.
+        """Whether the workers are ready, waiting at most ``timeout`` s for each answer.
 
         A live node polls it from a timer and subscribes to images once it is true (it keeps
         answering its services meanwhile).  RuntimeError if a worker failed to start.
@@ -366,8 +366,10 @@ class CameraProcesses:
         return block
 
     def forget(self) -> None:
-        """Nothing carried to the next frame (the worker forgets its camera's labels; the
-        caller forgets the left camera's)."""
+        """Nothing carried to the next frame: the worker forgets its camera's labels.
+
+        The caller forgets the left camera's (its own label carry).
+        """
         for conn in self._conns:
             conn.send(("forget", None))
 

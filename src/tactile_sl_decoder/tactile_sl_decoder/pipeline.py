@@ -177,7 +177,7 @@ class StereoPipeline:
         return self._map(run, left_gray, right_gray)
 
     def ready(self) -> bool:
-        """Whether the camera worker processes (if any) have started and warmed up.
+        """Whether the camera worker process (if any) has started and warmed up.
 
         Never blocks.  A live node subscribes to images only once this is true, so that its
         first frames do not queue (and get dropped) behind a second of worker start-up.
@@ -187,7 +187,7 @@ class StereoPipeline:
 
     @property
     def worker_pids(self) -> list[int]:
-        """Process ids of the camera worker processes (none in process)."""
+        """Process ids of the camera worker processes (the right camera's; none in process)."""
         return self._procs.pids if self._procs is not None else []
 
     def forget_frames(self) -> None:
@@ -333,7 +333,7 @@ class StereoPipeline:
 
         ``track``: the frames of a camera stream (images path), whose cells may be carried
         from the frame before (:meth:`decode_many`); ``matches``: the cameras' matches to
-        their previous frames when worker processes made them.
+        their previous frames when a worker process made one of them.
         """
         t0 = time.perf_counter()
         tracked = False

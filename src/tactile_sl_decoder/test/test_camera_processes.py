@@ -1,4 +1,4 @@
-"""Camera worker processes (camera_processes.py) give the in-process pipeline's bytes."""
+"""The camera worker process (camera_processes.py) gives the in-process pipeline's bytes."""
 import pytest
 
 from tactile_sl_common.images import to_gray

@@ -71,8 +71,8 @@ class StreamMemory:
         In full when cells are not carried, every ``refresh_frames`` frames, or when a glyph
         has no glyph of the previous frame at its place (new, or moved too far).
         ``matches``: each camera's match of these glyphs to its previous frame's glyphs
-        (default: this memory's label carries' latest, :attr:`LabelCarry.last`; camera
-        worker processes keep their carries and send their matches).
+        (default: this memory's label carries' latest, :attr:`LabelCarry.last`; a camera
+        worker process keeps its carry and sends its match).
         """
         p = self.params
         if not (p.enabled and p.cells) or self.full_decode_in <= 0:

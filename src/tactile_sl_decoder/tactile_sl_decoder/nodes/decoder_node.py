@@ -65,7 +65,7 @@ WORKER_START_TIMEOUT = 120.0
 HEALTH_WAIT_S = 5.0
 """Seconds the calibration health check waits for the touch reference (see
 :meth:`DecoderNode._judge_calibration`)."""
-"""Seconds the camera worker processes may take to start before the node gives up."""
+"""Seconds the camera worker process may take to start before the node gives up."""
 
 
 class DecoderNode(Node):
@@ -133,7 +133,7 @@ class DecoderNode(Node):
                 lambda m, s=side: self._on_info(s, m),  # type: ignore[misc]  # s=side
                 inputs)
         if self.input_mode == "images":
-            # Images are subscribed to once the camera worker processes have started and
+            # Images are subscribed to once the camera worker process has started and
             # warmed up (~1-2 s; the node answers its services meanwhile): the first frames
             # would otherwise queue behind them and be lost.
             self._inputs_qos = inputs
@@ -171,7 +171,7 @@ class DecoderNode(Node):
             return
         if not self.pipeline.ready():
             if time.monotonic() - self._starting_since > WORKER_START_TIMEOUT:
-                raise RuntimeError(f"the camera worker processes did not start within "
+                raise RuntimeError(f"the camera worker process did not start within "
                                    f"{WORKER_START_TIMEOUT:.0f} s")
             return
         self.destroy_timer(self._start_timer)
@@ -193,7 +193,7 @@ class DecoderNode(Node):
                 lambda m, s=side: self._on_frame(s, m),  # type: ignore[misc]  # s=side
                 self._inputs_qos)
         if self.pipeline.params.processes:
-            self.get_logger().info(f"camera worker processes ready after "
+            self.get_logger().info(f"camera worker process ready after "
                                    f"{time.monotonic() - self._starting_since:.1f} s: "
                                    f"subscribed to left/image_raw and right/image_raw")
 

@@ -74,10 +74,10 @@ class DecoderNodeSettings:
     publish_empty: bool = True
     """Publish a cloud with no point for frames that decoded nothing."""
     camera_processes: bool = True
-    """Extract and classify each camera's images in a worker process of its own
-    (input=images): the two images on two cores side by side, without sharing Python's
-    interpreter lock, while this process decodes and runs the touch stage; false = in this
-    process (see threads). The same results either way."""
+    """Extract and classify the right camera's images in a worker process while this
+    process does the left camera's (input=images): the two images on two cores side by
+    side, without sharing Python's interpreter lock; this process then decodes and runs the
+    touch stage. false = both in this process (see threads). The same results either way."""
     threads: int = 2
     """Without camera_processes: worker threads for the two images of a frame (2 extracts and
     classifies them concurrently, 1 = sequential)."""
