@@ -11,8 +11,8 @@ its camera's label carry, exactly as the in-process pipeline keeps it per camera
 results are the same bytes (test).  Until 2026-12-03 both cameras had a worker and the
 node's process waited for them: each hand-off (wake-up, pickling) cost ~0.3 ms each way and
 the second worker started its frame ~1 ms after the first on the 2-core VM, 2.4 ms a frame
-in all; one worker and the left half here took 8.6 instead of 11.2 ms a frame (two_contacts,
-same bytes).
+in all.  With one worker the points come 0.6-2.5 ms sooner and the node takes 200 MB less
+(same bytes; the figures, and what did not change, in docs/decoder.md).
 
 The image goes to the worker through shared memory and its glyphs come back pickled
 through shared memory too (about 0.15 MB a frame; through a pipe, whose 64 kB buffer splits
@@ -231,7 +231,7 @@ def _half(image: np.ndarray, job: CameraJob, camera: Any, classifier: Classifier
           carry: LabelCarry) -> CameraResult:
     # ``image`` lies in shared memory the main process rewrites for the next frame: nothing
     # computed here keeps a view of it (extraction copies what it keeps)
-    """:func:`camera_half` in a worker process, with the job's settings."""
+    """:func:`camera_half` with the job's settings: in the worker, or the left half here."""
     if job.threshold is not None:
         classifier.threshold = job.threshold
     if job.carry is None:
@@ -279,6 +279,7 @@ class CameraProcesses:
         self._image: SharedMemory | None = None
         self._result: SharedMemory | None = SharedMemory(create=True, size=RESULT_BYTES)
         self._started = [False] * len(self._procs)   # each worker's "ready" received
+
     def wait_ready(self, timeout: float = 60.0) -> None:
         """Wait until the workers have started and warmed up (RuntimeError if one failed).
 
