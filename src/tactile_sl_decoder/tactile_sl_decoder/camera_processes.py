@@ -258,66 +258,58 @@ class CameraProcesses:
     ``tools/bench_pipeline.py --processes``: see docs/decoder.md).
     """
 
-    SIDES = ("right",)
-    """The cameras that have a worker process (the left camera's half runs in the caller)."""
-
     def __init__(self, weights: str | None, threshold: float | None,
                  cpu_threads: int = 1) -> None:
         context = multiprocessing.get_context("spawn")
-        self._conns: list[Connection] = []
-        self._procs: list[Any] = []
-        for side in self.SIDES:
-            mine, theirs = context.Pipe()
-            proc = context.Process(target=_serve, args=(theirs, weights, threshold,
-                                                        cpu_threads),
-                                   name=f"tactile-sl {side} camera", daemon=True)
-            proc.start()
-            theirs.close()
-            self._conns.append(mine)
-            self._procs.append(proc)
+        self._conn, theirs = context.Pipe()
+        self._proc: Any = context.Process(target=_serve, args=(theirs, weights, threshold,
+                                                               cpu_threads),
+                                          name="tactile-sl right camera", daemon=True)
+        self._proc.start()
+        theirs.close()
         self._camera: Any = None               # the worker's camera calibration, as sent
         self._image: SharedMemory | None = None
         self._result: SharedMemory | None = SharedMemory(create=True, size=RESULT_BYTES)
-        self._started = [False] * len(self._procs)   # each worker's "ready" received
+        self._started = False                  # the worker's "ready" received
+        self._closed = False
 
     def wait_ready(self, timeout: float = 60.0) -> None:
-        """Wait until the workers have started and warmed up (RuntimeError if one failed).
+        """Wait until the worker has started and warmed up (RuntimeError if it failed).
 
         :meth:`run` waits for it too.
         """
         deadline = time.monotonic() + timeout
         while not self.poll_ready(max(0.0, deadline - time.monotonic())):
             if time.monotonic() >= deadline:
-                slow = [p.name for p, up in zip(self._procs, self._started) if not up]
-                raise RuntimeError(f"the {' and '.join(slow)} worker process(es) did not "
-                                   f"start within {timeout:.0f} s")
+                raise RuntimeError(f"the {self._proc.name} worker process did not start "
+                                   f"within {timeout:.0f} s")
 
     @property
     def pids(self) -> list[int]:
-        """The worker processes' ids (one per camera of :attr:`SIDES`)."""
-        return [int(p.pid) for p in self._procs]
+        """The worker process's id (the right camera's), as a list."""
+        return [] if self._closed else [int(self._proc.pid)]
 
     def poll_ready(self, timeout: float = 0.0) -> bool:
-        """Whether the workers are ready, waiting at most ``timeout`` s for each answer.
+        """Whether the worker is ready, waiting at most ``timeout`` s for its answer.
 
         A live node polls it from a timer and subscribes to images once it is true (it keeps
-        answering its services meanwhile).  RuntimeError if a worker failed to start.
+        answering its services meanwhile).  RuntimeError if the worker failed to start.
         """
-        for i, (conn, proc) in enumerate(zip(self._conns, self._procs)):
-            if self._started[i]:
-                continue
-            try:
-                if not conn.poll(timeout):
-                    continue
-                status, value = conn.recv()
-            except (EOFError, OSError):
-                raise RuntimeError(f"the {proc.name} worker process ended while starting "
-                                   f"(exit code {proc.exitcode})") from None
-            if status == "error":
-                raise RuntimeError(f"the {proc.name} worker process failed to start: "
-                                   f"{value}") from value
-            self._started[i] = True
-        return all(self._started)
+        if self._started:
+            return True
+        proc = self._proc
+        try:
+            if not self._conn.poll(timeout):
+                return False
+            status, value = self._conn.recv()
+        except (EOFError, OSError):
+            raise RuntimeError(f"the {proc.name} worker process ended while starting "
+                               f"(exit code {proc.exitcode})") from None
+        if status == "error":
+            raise RuntimeError(f"the {proc.name} worker process failed to start: "
+                               f"{value}") from value
+        self._started = True
+        return True
 
     def run(self, images: tuple[np.ndarray, np.ndarray], cameras: tuple[Any, Any],
             jobs: tuple[CameraJob, CameraJob], classifier: Classifier,
@@ -328,10 +320,10 @@ class CameraProcesses:
         process), exactly as the worker runs the right one with its own.  An error of either
         half is raised once both have ended (the worker's pipe stays in step).
         """
-        self.wait_ready()
-        if self._result is None:
+        if self._closed or self._result is None:
             raise RuntimeError("the camera processes were closed")
-        conn, proc, result = self._conns[0], self._procs[0], self._result
+        self.wait_ready()
+        conn, proc, result = self._conn, self._proc, self._result
         if cameras[1] is not self._camera:
             conn.send(("camera", cameras[1]))
             self._camera = cameras[1]
@@ -371,22 +363,22 @@ class CameraProcesses:
 
         The caller forgets the left camera's (its own label carry).
         """
-        for conn in self._conns:
-            conn.send(("forget", None))
+        if not self._closed:
+            self._conn.send(("forget", None))
 
     def close(self) -> None:
-        """Stop the workers (they also end when this process does)."""
-        for conn in self._conns:
-            try:
-                conn.send(("stop", None))
-            except (OSError, ValueError):
-                pass
-            conn.close()
-        for proc in self._procs:
-            proc.join(timeout=2.0)
-            if proc.is_alive():
-                proc.terminate()
-        self._conns, self._procs = [], []
+        """Stop the worker (it also ends when this process does)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._conn.send(("stop", None))
+        except (OSError, ValueError):
+            pass
+        self._conn.close()
+        self._proc.join(timeout=2.0)
+        if self._proc.is_alive():
+            self._proc.terminate()
         for block in (self._image, self._result):
             if block is not None:
                 block.close()
