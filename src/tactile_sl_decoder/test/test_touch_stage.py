@@ -5,6 +5,7 @@ from test_touch_traction import PITCH, SHAPE, _displacement
 
 from tactile_sl_common.clouds import pack_points
 from tactile_sl_common.elasticity import Elastomer
+from tactile_sl_decoder.touch.contact import depth_map
 from tactile_sl_decoder.touch.messages import touch_messages
 from tactile_sl_decoder.touch.reference import nominal_positions
 from tactile_sl_decoder.touch.sensor import SensorConfig
@@ -51,7 +52,14 @@ def test_reference_then_outputs(stage):
     assert abs(c.centroid[0] - 5e-4) < 1e-4 and abs(c.centroid[1] + 5e-4) < 1e-4
     assert abs(c.max_depth + disp[:, 2].min()) < 0.1 * -disp[:, 2].min()
     assert abs(c.area - np.pi * 2e-3 ** 2) < 0.25 * np.pi * 2e-3 ** 2
+    # the depth map is made on first use (a node publishes it only while heard), from the
+    # frame's cell grid of indentation
+    assert "depth" not in vars(out)
     assert out.depth.shape == (stage.depth_grid.height, stage.depth_grid.width)
+    assert "depth" in vars(out) and out.depth is out.depth
+    assert np.array_equal(out.depth, depth_map(out.indent, stage.params.contact.depth_upsample),
+                          equal_nan=True)
+    assert np.nanmax(out.depth) == pytest.approx(np.nanmax(out.indent))
     # pressed: a tare is refused; released: accepted, and outputs stop until the new reference
     ok, text = stage.tare()
     assert not ok and "touched" in text
