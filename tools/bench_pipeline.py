@@ -17,8 +17,10 @@ the left image's, as in the live decoder node (no interpreter lock shared betwee
 images; the image goes through shared memory and its glyphs come back pickled), and
 cpu+touch counts the worker's CPU time too.
 With touch outputs (the default; --no-touch leaves them out) the touch stage runs after
-every frame as in the node and replay ("touch", of which "slip" is the slip estimate,
-"total+touch"; "cpu+touch" is the process CPU time of both). In the same run and on the same
+every frame as in the node and replay ("touch", of which "traction" is the inversion,
+"contact" the contact state and "slip" the slip estimate; the depth map is made only when
+asked for, as a node does while nobody subscribes to it; "total+touch"; "cpu+touch" is the
+process CPU time of both). In the same run and on the same
 frames: the floor, the work no decoder of this design can avoid (threshold + connected
 components of both images, one batched classifier pass over the patches the frame had to
 classify -- all of them with carry off, those not carried with carry on --, triangulation
@@ -219,8 +221,8 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
     first = pipes[modes[0]]
     floors = {"serial": Floor(first, parallel=False), "parallel": Floor(first, parallel=True)}
     stages = ("check", "extract", "lattice", "classify", "workers", "decode", "stereo", "total")
-    rows = list(stages) + (["touch", "slip", "total+touch", "cpu+touch"] if args.touch
-                           else [])
+    touch_rows = ["touch", "traction", "contact", "slip", "total+touch", "cpu+touch"]
+    rows = list(stages) + (touch_rows if args.touch else [])
     timings: dict[str, dict[str, list[float]]] = {m: {s: [] for s in rows} for m in modes}
     carried: dict[str, list[float]] = {m: [] for m in modes}
     floor_t: dict[str, dict[str, list[float]]] = {k: {} for k in floors}
@@ -272,8 +274,9 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
                         continue                         # only frames with touch outputs
                     if args.touch:
                         t["touch"].append(1e3 * (t2 - t1))
-                        if touch is not None:           # the slip estimate, part of touch
-                            t["slip"].append(touch.timings_ms["slip"])
+                        if touch is not None:           # parts of the touch stage
+                            for part in ("traction", "contact", "slip"):
+                                t[part].append(touch.timings_ms[part])
                         t["total+touch"].append(1e3 * (t2 - t0))
                         t["cpu+touch"].append(1e3 * (c1 - c0))
                     paired[mode]["total"].append(res.timings_ms["total"])
