@@ -18,14 +18,14 @@ images; the image goes through shared memory and its glyphs come back pickled), 
 cpu+touch counts the worker's CPU time too.
 With touch outputs (the default; --no-touch leaves them out) the touch stage runs after
 every frame as in the node and replay ("touch", of which "traction" is the inversion,
-"contact" the contact state and "slip" the slip estimate; the depth map is made only when
-asked for, as a node does while nobody subscribes to it; "total+touch"; "cpu+touch" is the
-process CPU time of both). In the same run and on the same
-frames: the floor, the work no decoder of this design can avoid (threshold + connected
-components of both images, one batched classifier pass over the patches the frame had to
-classify -- all of them with carry off, those not carried with carry on --, triangulation
-of the matched cells, the touch stage's two matrix-vector products), on one thread and with
-the two images' labelling in
+"contact" the contact state and "slip" the slip estimate, every output made as replay
+writes them: a live node makes the contact state and the depth map only while something
+subscribes to them; "total+touch"; "cpu+touch" is the process CPU time of both). In the
+same run and on the same frames: the floor, the work no decoder of this design can avoid
+(threshold + connected components of both images, one batched classifier pass over the
+patches the frame had to classify -- all of them with carry off, those not carried with
+carry on --, triangulation of the matched cells, the touch stage's two matrix-vector
+products), on one thread and with the two images' labelling in
 two threads, and total / floor (see docs/decoder.md, "Floor and total / floor").
 Each bag runs from its first frame in bag order, once per repetition, so labels are carried
 from frame to frame as from a camera (--carry on, the default; off: every glyph classified
@@ -254,10 +254,12 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
                     t0 = time.perf_counter()
                     out = step.process(left, right, fr.left_info, fr.right_info,
                                        on_points=points_ready)
+                    res, touch = out.stereo, out.touch.result
+                    if touch is not None:     # every output, as replay writes them
+                        _ = touch.contact, touch.depth
                     t2 = time.perf_counter()
                     c1 = _cpu_seconds(pipe)
                     t1 = points_at[-1]
-                    res, touch = out.stereo, out.touch.result
                     if last and fr.ground_truth is not None:
                         metrics.append(frame_metrics(res.points, fr.ground_truth,
                                                      0.5 * pipe.pattern.pitch_m, fr.stamp_ns))

@@ -56,8 +56,8 @@ def _result(truth, dforce=(0.0, 0.0, 0.0), dmz=0.0, darea=0.0, dcen=(0.0, 0.0), 
     force[:, 2] = (truth.force[2] + dforce[2]) / len(rows)
     return TouchResult(rows, cols, truth.position[keep], disp, force,
                        np.asarray(truth.force) + dforce,
-                       np.array([0.0, 0.0, truth.moment[2] + dmz]), contact,
-                       np.zeros((5, 5)), lambda indent: indent.astype(np.float32))
+                       np.array([0.0, 0.0, truth.moment[2] + dmz]), contact.in_contact,
+                       lambda: contact, np.zeros((5, 5)))
 
 
 def test_displacement_rmse_matches_cells_by_row_and_col():

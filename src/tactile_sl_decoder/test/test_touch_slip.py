@@ -13,7 +13,6 @@ import pytest
 from tactile_sl_common.clouds import pack_points
 from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_NO_CONTACT, SLIP_PARTIAL, SLIP_STICK
-from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.messages import slip_fields, slip_markers
 from tactile_sl_decoder.touch.reference import nominal_positions
 from tactile_sl_decoder.touch.sensor import SensorConfig
@@ -150,17 +149,15 @@ def test_a_contact_leaving_the_pad_gives_defined_outputs(stages, x):
 def test_too_few_cells_is_stick_with_unknown_margin():
     estimator = SlipEstimator(HALF, PITCH)
     rest = NOMINAL[:6, :2]
-    contact = ContactState(in_contact=True, region_force=[0.3], region_area=[2e-5],
-                           region_centroid=[(float(rest[0, 0]), float(rest[0, 1]), 0.0)])
-    est = estimator.estimate(rest, np.zeros((6, 3)), np.full(6, 0.05), contact, 0.25)
+    est = estimator.estimate(rest, np.zeros((6, 3)), np.full(6, 0.05), True, 0.25)
     assert est.state == SLIP_STICK and math.isnan(est.margin) and math.isnan(est.friction)
     assert 0 < est.cells < SlipParams().min_cells
     # nothing presses although the contact state says so (hysteresis): no contact
-    est = estimator.estimate(rest, np.zeros((6, 3)), np.zeros(6), contact, 0.25)
+    est = estimator.estimate(rest, np.zeros((6, 3)), np.zeros(6), True, 0.25)
     assert est.state == SLIP_NO_CONTACT
     # NaN displacements are left out, never propagated
     disp = np.full((6, 3), np.nan)
-    est = estimator.estimate(rest, disp, np.full(6, 0.05), contact, 0.25)
+    est = estimator.estimate(rest, disp, np.full(6, 0.05), True, 0.25)
     assert est.state == SLIP_STICK and est.cells == 0
 
 

@@ -255,3 +255,35 @@ def test_contact_thresholds_changed_live_apply_to_the_next_frame():
     assert frame(1.2).in_contact and frame(0.9).in_contact          # on above 1 N, held ...
     assert not frame(0.5).in_contact                                # ... off below 0.8 N
     assert stage.contact_params.area_fraction == stage.solver.area_fraction
+
+
+def test_contact_state_made_on_first_use_is_that_of_its_frame():
+    """The contact state (and depth map) are made only when asked for (a node publishes
+    them only while heard); made late, after more frames and a live change, they are the
+    frame's own, and the in_contact hysteresis runs every frame regardless."""
+    sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
+    eager, lazy = (TouchStage(sensor, SHAPE, PITCH) for _ in range(2))
+    rng = np.random.default_rng(11)
+    loads = [0.0, 0.3, 0.008, 0.006, 0.004, 0.012, 0.5]   # on, held (8 and 6 mN), off, ...
+    frames = [_points(_displacement(sensor.elastomer, [(0.02, 0.0, -f, 1.5e-3, -5e-4, 0.0)]
+                                    if f else [], 1e-6, rng)) for f in loads]
+    for stage in (eager, lazy):
+        assert stage.update(frames[0]) is None
+    want = [eager.update(p) for p in frames[1:]]
+    got = [lazy.update(p) for p in frames[1:]]
+    assert [w.contact.in_contact for w in want] == [True, True, True, False, True, True]
+    assert all("contact" not in vars(g) and "depth" not in vars(g) for g in got)
+    assert [g.in_contact for g in got] == [w.contact.in_contact for w in want]
+    lazy.params.contact.force_on = lazy.params.contact.force_off = 10.0   # after the frames
+    lazy.params.contact.core_fraction = 0.9
+    before = dict(got[-1].timings_ms)
+    for g, w in zip(got[::-1], want[::-1]):        # made last to first
+        assert g.contact == w.contact
+        assert np.array_equal(g.depth, w.depth, equal_nan=True)
+    assert got[-1].contact.area > 0
+    # the time it took is added to the frame's contact and touch times
+    added = got[-1].timings_ms["contact"] - before["contact"]
+    assert added > 0 and got[-1].timings_ms["touch"] - before["touch"] == pytest.approx(added)
+    # the tare asks the last frame's contact state: refused while pressed
+    ok, text = lazy.tare()
+    assert not ok and "touched" in text

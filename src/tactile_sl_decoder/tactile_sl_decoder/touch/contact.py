@@ -331,6 +331,16 @@ def _max_indentation(z: np.ndarray, noise: float, candidates: int, outlier_sigma
     return max(best, 0.0)
 
 
+def contact_hysteresis(normal_force: float, was_in_contact: bool,
+                       params: ContactParams) -> bool:
+    """``in_contact`` of a frame from its normal force (N) and the last frame's.
+
+    Above ``force_on``, or above ``force_off`` while the last frame was in contact: noise
+    near one threshold cannot chatter.
+    """
+    return normal_force > (params.force_off if was_in_contact else params.force_on)
+
+
 def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                   forces: np.ndarray, wrench: np.ndarray, shape: tuple[int, int], pitch: float,
                   indent_grid: np.ndarray, was_in_contact: bool, params: ContactParams,
@@ -381,8 +391,7 @@ def contact_state(rest_xy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     state = ContactState(normal_force=normal,
                          shear_force=(float(wrench[0]), float(wrench[1]), 0.0),
                          max_depth=max_indentation(indent_grid, params.displacement_noise))
-    threshold = params.force_off if was_in_contact else params.force_on
-    state.in_contact = normal > threshold
+    state.in_contact = contact_hysteresis(normal, was_in_contact, params)
     pressing = press > 0.0
     if normal <= 0.0 or not pressing.any():
         return state

@@ -54,7 +54,6 @@ import numpy as np
 
 from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_decoder.contract import SLIP_GROSS, SLIP_NO_CONTACT, SLIP_PARTIAL, SLIP_STICK
-from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.hertz_response import HertzResponse, hertz_response
 from tactile_sl_decoder.touch.mindlin_fit import (
     HertzBases,
@@ -163,13 +162,13 @@ class SlipEstimator:
     # ------------------------------------------------------------------ estimate
 
     def estimate(self, rest_xy: np.ndarray, displacement: np.ndarray, pressing: np.ndarray,
-                 contact: ContactState, area_fraction: float,
+                 in_contact: bool, area_fraction: float,
                  lattice: np.ndarray | None = None) -> SlipEstimate:
         """Slip of the contact pressing hardest, from the decoded cells of one frame.
 
         ``rest_xy`` (M, 2) rest positions, ``displacement`` (M, 3) and ``pressing`` (M,)
         the normal force (N, >= 0 pressing) of the decoded cells (pad frame, m);
-        ``contact`` the frame's contact state (``in_contact`` gates the estimate);
+        ``in_contact`` the frame's contact state's (it gates the estimate);
         ``area_fraction`` the share of the peak above which a cell counts into a contact;
         ``lattice`` (M, 2) the cells' integer (column, row), from their rest positions if
         not given.
@@ -177,7 +176,7 @@ class SlipEstimator:
         contact with too few decoded cells around it (e.g. mostly off the pad) gives
         ``SLIP_STICK`` with NaN margin and stick ratio.
         """
-        if not contact.in_contact:
+        if not in_contact:
             return SlipEstimate()
         p = self.params
         rest = np.asarray(rest_xy, np.float64)

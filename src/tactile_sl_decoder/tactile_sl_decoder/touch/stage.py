@@ -39,6 +39,7 @@ from tactile_sl_decoder.touch.contact import (
     ContactParams,
     ContactState,
     DepthMapper,
+    contact_hysteresis,
     contact_state,
     depth_grid,
 )
@@ -124,7 +125,14 @@ class Reference:
 
 @dataclass
 class TouchResult:
-    """Touch outputs of one stereo frame (pad frame, SI)."""
+    """Touch outputs of one stereo frame (pad frame, SI).
+
+    The contact state and the depth map are made on first use, from what the frame left
+    (a live node publishes ``contact`` and ``depth`` only while something subscribes to
+    them, as it builds every output; ``tactile-sl replay`` writes both for every frame):
+    together ~0.7-1.1 ms of a frame's ~2-3.5 ms on the 60 Hz press and two_contacts.
+    ``in_contact`` is known at once (the force hysteresis of the contact state).
+    """
 
     rows: np.ndarray           # (M,) cells decoded in this frame
     cols: np.ndarray
@@ -133,22 +141,34 @@ class TouchResult:
     force: np.ndarray          # (M, 3) N on each decoded cell
     wrench_force: np.ndarray   # (3,) N
     wrench_moment: np.ndarray  # (3,) N m about the pad origin
-    contact: ContactState
-    indent: np.ndarray         # (rows, cols) m of indentation per cell, NaN where not decoded
-    depth_of: Callable[[np.ndarray], np.ndarray] = field(repr=False, compare=False)
+    in_contact: bool           # the contact state's in_contact
+    contact_of: Callable[[], ContactState] = field(repr=False, compare=False)
+    """The frame's contact state (:func:`~.contact.contact_state` on the frame's data)."""
+    indent: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    """(rows, cols) m of indentation per cell, NaN where not decoded."""
+    depth_of: Callable[[np.ndarray], np.ndarray] = field(
+        default=lambda indent: indent.astype(np.float32), repr=False, compare=False)
     """The depth map of ``indent`` (:class:`~.contact.DepthMapper` of the stage)."""
     timings_ms: dict[str, float] = field(default_factory=dict)
+    """ms per part; the contact state's time is added to ``contact`` and ``touch`` when it
+    is made"""
     slip: SlipEstimate | None = field(default_factory=SlipEstimate)
     """Of the contact pressing hardest; None where it was not estimated (nobody asked:
     :attr:`TouchStage.slip_wanted`)."""
 
     @functools.cached_property
-    def depth(self) -> np.ndarray:
-        """(H, W) float32 m of indentation on the depth grid, NaN where not decoded.
+    def contact(self) -> ContactState:
+        """The contact state (normal and shear force, area, centroid, depth, regions)."""
+        start = time.perf_counter()
+        state = self.contact_of()
+        spent = 1e3 * (time.perf_counter() - start)
+        for part in ("contact", "touch"):
+            self.timings_ms[part] = self.timings_ms.get(part, 0.0) + spent
+        return state
 
-        Made on first use (~0.15 ms a frame on the 60 Hz press): a live node publishes it
-        only while something subscribes to ``depth``, as it builds every output.
-        """
+    @functools.cached_property
+    def depth(self) -> np.ndarray:
+        """(H, W) float32 m of indentation on the depth grid, NaN where not decoded."""
         return self.depth_of(self.indent)
 
 
@@ -240,7 +260,7 @@ class TouchStage:
     def tare(self) -> tuple[bool, str]:
         """Start a new reference from the next frames; refused while visibly touched."""
         last = self._last
-        if last is not None and (last.contact.in_contact
+        if last is not None and (last.in_contact
                                  or last.contact.max_depth > self.params.tare_max_depth):
             return False, (f"refused: the pad is touched (normal force "
                            f"{last.contact.normal_force * 1e3:.1f} mN, indentation "
@@ -361,6 +381,16 @@ class TouchStage:
             return contact
         return dataclasses.replace(contact, area_fraction=self._area_fraction)
 
+    def _frame_contact_params(self) -> ContactParams:
+        """:attr:`contact_params` as a copy of its own.
+
+        A frame's contact state may be made after a later live change (on first use), and
+        must use the settings of its frame.
+        """
+        contact = self.params.contact
+        return dataclasses.replace(contact,
+                                   area_fraction=contact.area_fraction or self._area_fraction)
+
     # ------------------------------------------------------------------ frames
 
     def update(self, points: np.ndarray, tag: Any = None) -> TouchResult | None:
@@ -428,31 +458,39 @@ class TouchStage:
         forces_ref, wrench = self.solver.solve(disp_ref, valid)
         self.last_solve = (disp_ref, valid, forces_ref)    # per reference cell (calibration)
         t2 = time.perf_counter()
-        ref_rows, ref_cols = self.solver.rows, self.solver.cols
+        solver = self.solver
         wrench_force, wrench_moment = wrench[:3], wrench[3:]
-        contact_params = self.contact_params
-        noise = contact_params.displacement_noise
+        params = self._frame_contact_params()
         ref_noise = ref.noise
-        cell_noise = ref_noise.support
-        pressure = self.solver.support_pressure(noise, contact_params.support_sigmas,
-                                                contact_params.support_edge_snr,
-                                                cell_noise=cell_noise)
-        support = None if pressure is None else (
-            pressure, noise * self.solver.support_gain if cell_noise is None else cell_noise)
+        window = solver.last_window
+
+        def support() -> tuple[np.ndarray, np.ndarray] | None:
+            """The constrained pressure near the contact and its noise (:mod:`.support`)."""
+            noise, cell_noise = params.displacement_noise, ref_noise.support
+            pressure = solver.support_pressure(noise, params.support_sigmas,
+                                               params.support_edge_snr, cell_noise=cell_noise,
+                                               window=window)
+            return None if pressure is None else (
+                pressure, noise * solver.support_gain if cell_noise is None else cell_noise)
+
+        support_of = support
+        fit_centroid = None
         if ref.consistent is not None:
             # the normal displacement the contact's pressure explains (:mod:`.consistent`)
-            if support is not None:
-                core = support[0] > contact_params.support_sigmas * support[1]
+            found = support()
+            support_of = lambda: found   # noqa: E731 - made once, here
+            if found is not None:
+                core = found[0] > params.support_sigmas * found[1]
             else:
                 press = -forces_ref[:, 2]
                 peak = float(press.max()) if len(press) else 0.0
-                core = press > contact_params.area_fraction * peak if peak > 0 else (
+                core = press > params.area_fraction * peak if peak > 0 else (
                     np.zeros(n, bool))
             # (a contact whose edge the support cannot locate: its pressure at half the
             # resolution, which the data cannot resolve finer; without a support inversion,
             # support_weight 0, per cell)
             fitted = ref.consistent.fit(disp_ref[:, 2], valid, core,
-                                        coarse=support is None and self.solver.has_support)
+                                        coarse=found is None and solver.has_support)
             if fitted is not None:
                 displacement[known, 2] = fitted[k[known]]
             normal = ref.consistent.normal_force(-float(wrench[2]))
@@ -465,24 +503,30 @@ class TouchStage:
                 forces_ref = forces_ref.copy()
                 forces_ref[:, 2] *= scale
                 wrench_force, wrench_moment = wrench[:3], wrench[3:]
-        fit_centroid = None if ref.consistent is None else ref.consistent.last_centroid
+            fit_centroid = ref.consistent.last_centroid
         indent = np.full(self.shape, np.nan)
         indent[rows, cols] = -displacement[:, 2]
-        contact = contact_state(ref.nominal[:, :2], ref_rows, ref_cols, forces_ref, wrench,
-                                self.shape, self.pitch, indent, self._in_contact,
-                                contact_params, ref_noise.moment, support, ref_noise.map,
-                                ref_noise.centroid, fit_centroid)
-        self._in_contact = contact.in_contact
+        was_in_contact = self._in_contact
+        self._in_contact = contact_hysteresis(max(-float(wrench[2]), 0.0), was_in_contact,
+                                              params)
+        nominal_xy, shape, pitch = ref.nominal[:, :2], self.shape, self.pitch
+
+        def contact() -> ContactState:
+            return contact_state(nominal_xy, solver.rows, solver.cols, forces_ref, wrench,
+                                 shape, pitch, indent, was_in_contact, params,
+                                 ref_noise.moment, support_of(), ref_noise.map,
+                                 ref_noise.centroid, fit_centroid)
+
         force = np.zeros((len(rows), 3))
         force[known] = forces_ref[k[known]]
         t3 = time.perf_counter()
         slip = (self.slip.estimate(self._rest_table[flat, :2], displacement, -force[:, 2],
-                                   contact, self.contact_params.area_fraction,
+                                   self._in_contact, params.area_fraction,
                                    np.column_stack([cols, rows]))
                 if self.slip_wanted() else None)
         t4 = time.perf_counter()
         result = TouchResult(rows, cols, position, displacement, force, wrench_force,
-                             wrench_moment, contact, indent, self._depth,
+                             wrench_moment, self._in_contact, contact, indent, self._depth,
                              {"displacement": 1e3 * (t1 - t0), "traction": 1e3 * (t2 - t1),
                               "contact": 1e3 * (t3 - t2), "slip": 1e3 * (t4 - t3),
                               "touch": 1e3 * (t4 - t0)}, slip)

@@ -408,8 +408,18 @@ class TractionSolver:
         """The constrained inversion is prepared (``support_weight`` > 0)."""
         return self._support_rows is not None
 
+    @property
+    def last_window(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """What :meth:`support_pressure` works on, from the last :meth:`solve`.
+
+        Its displacement (float32, flattened) and the cells near its contact map; None
+        without a map.
+        """
+        return self._near
+
     def support_pressure(self, noise: float, sigmas: float, min_snr: float,
-                         max_rounds: int = 30, cell_noise: np.ndarray | None = None
+                         max_rounds: int = 30, cell_noise: np.ndarray | None = None,
+                         window: tuple[np.ndarray, np.ndarray] | None = None
                          ) -> np.ndarray | None:
         """Normal pressure (N per cell, >= 0) near the last frame's contact, constrained.
 
@@ -424,13 +434,16 @@ class TractionSolver:
         (compiled); after ``max_rounds`` a cell still pulling is clipped to zero.
         ``cell_noise`` (N,): each cell's noise (N) instead of ``noise`` x
         :attr:`support_gain` (the cells' own expected errors: :mod:`.weights`).
+        ``window``: a frame's :attr:`last_window` (default: the last solve's), so that the
+        pressure of a frame can be made after later frames were solved.
         """
-        if self._support_rows is None or self._near is None or len(self._near[1]) == 0:
+        near = self._near if window is None else window
+        if self._support_rows is None or near is None or len(near[1]) == 0:
             return None
-        u32, window = self._near
-        free = _rows_product(self._support_rows, window, u32)
-        spread = (noise * self.support_gain[window] if cell_noise is None
-                  else cell_noise[window])
+        u32, near_cells = near
+        free = _rows_product(self._support_rows, near_cells, u32)
+        spread = (noise * self.support_gain[near_cells] if cell_noise is None
+                  else cell_noise[near_cells])
         if not np.any(free > min_snr * spread):
             return None
         out = np.zeros(len(self.cells))
@@ -438,9 +451,10 @@ class TractionSolver:
         # noise pulling farther away is left as it is (those cells do not press anyway), and
         # the inside of a contact presses clearly
         clear = free > sigmas * spread
-        p = constrained_edge(free, clear, self.rows[window], self.cols[window], self.shape[0],
-                             self.shape[1], self._support_inverse, window, int(max_rounds))
-        out[window] = np.maximum(p, 0.0)
+        p = constrained_edge(free, clear, self.rows[near_cells], self.cols[near_cells],
+                             self.shape[0], self.shape[1], self._support_inverse, near_cells,
+                             int(max_rounds))
+        out[near_cells] = np.maximum(p, 0.0)
         return out
 
     def _area_fraction(self, g: np.ndarray, x: np.ndarray, y: np.ndarray,
