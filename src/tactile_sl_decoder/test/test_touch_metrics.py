@@ -54,7 +54,7 @@ def _result(truth, dforce=(0.0, 0.0, 0.0), dmz=0.0, darea=0.0, dcen=(0.0, 0.0), 
                                      0.0), max_depth=truth.max_depth + ddepth)
     force = np.zeros((len(rows), 3))
     force[:, 2] = (truth.force[2] + dforce[2]) / len(rows)
-    return TouchResult(rows, cols, truth.position[keep], disp, force,
+    return TouchResult(rows, cols, truth.position[keep], disp, lambda: force,
                        np.asarray(truth.force) + dforce,
                        np.array([0.0, 0.0, truth.moment[2] + dmz]), contact.in_contact,
                        lambda: contact, np.zeros((5, 5)))

@@ -257,12 +257,14 @@ def test_contact_thresholds_changed_live_apply_to_the_next_frame():
     assert stage.contact_params.area_fraction == stage.solver.area_fraction
 
 
-def test_contact_state_made_on_first_use_is_that_of_its_frame():
-    """The contact state (and depth map) are made only when asked for (a node publishes
-    them only while heard); made late, after more frames and a live change, they are the
-    frame's own, and the in_contact hysteresis runs every frame regardless."""
+def test_forces_and_contact_state_made_on_first_use_are_those_of_their_frame():
+    """The per-cell forces, the contact state and the depth map are made only when asked
+    for (a node publishes them only while heard); made late, after more frames and a live
+    change, they are the frame's own, and the in_contact hysteresis runs every frame
+    regardless."""
     sensor = SensorConfig(Elastomer(3e5, 0.49, 0.0))
     eager, lazy = (TouchStage(sensor, SHAPE, PITCH) for _ in range(2))
+    lazy.slip_wanted = lambda: False        # a node nobody asks for slip (slip needs forces)
     rng = np.random.default_rng(11)
     loads = [0.0, 0.3, 0.008, 0.006, 0.004, 0.012, 0.5]   # on, held (8 and 6 mN), off, ...
     frames = [_points(_displacement(sensor.elastomer, [(0.02, 0.0, -f, 1.5e-3, -5e-4, 0.0)]
@@ -272,18 +274,26 @@ def test_contact_state_made_on_first_use_is_that_of_its_frame():
     want = [eager.update(p) for p in frames[1:]]
     got = [lazy.update(p) for p in frames[1:]]
     assert [w.contact.in_contact for w in want] == [True, True, True, False, True, True]
-    assert all("contact" not in vars(g) and "depth" not in vars(g) for g in got)
+    assert all(not {"force", "contact", "depth"} & set(vars(g)) for g in got)
     assert [g.in_contact for g in got] == [w.contact.in_contact for w in want]
+    assert [g.wrench_force.tolist() for g in got] == [w.wrench_force.tolist() for w in want]
     lazy.params.contact.force_on = lazy.params.contact.force_off = 10.0   # after the frames
     lazy.params.contact.core_fraction = 0.9
     before = dict(got[-1].timings_ms)
-    for g, w in zip(got[::-1], want[::-1]):        # made last to first
-        assert g.contact == w.contact
+    for i, (g, w) in enumerate(zip(got[::-1], want[::-1])):      # made last to first
+        if i % 2:
+            assert np.array_equal(g.force, w.force)                 # forces first, or ...
+        assert g.contact == w.contact                               # ... with the contact
+        assert np.array_equal(g.force, w.force)
         assert np.array_equal(g.depth, w.depth, equal_nan=True)
-    assert got[-1].contact.area > 0
-    # the time it took is added to the frame's contact and touch times
-    added = got[-1].timings_ms["contact"] - before["contact"]
-    assert added > 0 and got[-1].timings_ms["touch"] - before["touch"] == pytest.approx(added)
+    assert got[-1].contact.area > 0 and np.abs(got[-1].force[:, 2]).sum() > 0
+    # the time they took is added to the frame's traction, contact and touch times
+    added = {part: got[-1].timings_ms[part] - before[part] for part in before}
+    assert added["traction"] > 0 and added["contact"] > 0
+    assert added["touch"] == pytest.approx(added["traction"] + added["contact"])
+    # the force calibration's input is the last frame's, made when asked for
+    disp, valid, forces = lazy.last_solve
+    assert np.array_equal(forces, eager.last_solve[2]) and valid.all()
     # the tare asks the last frame's contact state: refused while pressed
     ok, text = lazy.tare()
     assert not ok and "touched" in text

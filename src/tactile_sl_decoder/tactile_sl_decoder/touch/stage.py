@@ -127,22 +127,26 @@ class Reference:
 class TouchResult:
     """Touch outputs of one stereo frame (pad frame, SI).
 
-    The contact state and the depth map are made on first use, from what the frame left
-    (a live node publishes ``contact`` and ``depth`` only while something subscribes to
-    them, as it builds every output; ``tactile-sl replay`` writes both for every frame):
-    together ~0.7-1.1 ms of a frame's ~2-3.5 ms on the 60 Hz press and two_contacts.
-    ``in_contact`` is known at once (the force hysteresis of the contact state).
+    The per-cell forces, the contact state and the depth map are made on first use, from
+    what the frame left (a live node publishes ``field``, ``contact`` and ``depth`` only
+    while something subscribes to them, as it builds every output; ``tactile-sl replay``
+    writes them all, with the same bytes): ~1.5-2 ms of a frame's ~2-3.5 ms on the 60 Hz
+    press and two_contacts. The resultant and ``in_contact`` (the force hysteresis of the
+    contact state) are made at once.
     """
 
     rows: np.ndarray           # (M,) cells decoded in this frame
     cols: np.ndarray
     position: np.ndarray       # (M, 3) current positions
     displacement: np.ndarray   # (M, 3) from the reference
-    force: np.ndarray          # (M, 3) N on each decoded cell
-    wrench_force: np.ndarray   # (3,) N
-    wrench_moment: np.ndarray  # (3,) N m about the pad origin
-    in_contact: bool           # the contact state's in_contact
-    contact_of: Callable[[], ContactState] = field(repr=False, compare=False)
+    force_of: Callable[[], np.ndarray] = field(repr=False, compare=False)
+    """The frame's per-cell forces (:meth:`~.traction.TractionSolver.forces`)."""
+    wrench_force: np.ndarray = field(default_factory=lambda: np.zeros(3))   # (3,) N
+    wrench_moment: np.ndarray = field(default_factory=lambda: np.zeros(3))  # (3,) N m
+    """about the pad origin"""
+    in_contact: bool = False   # the contact state's in_contact
+    contact_of: Callable[[], ContactState] = field(default=ContactState, repr=False,
+                                                   compare=False)
     """The frame's contact state (:func:`~.contact.contact_state` on the frame's data)."""
     indent: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     """(rows, cols) m of indentation per cell, NaN where not decoded."""
@@ -150,26 +154,43 @@ class TouchResult:
         default=lambda indent: indent.astype(np.float32), repr=False, compare=False)
     """The depth map of ``indent`` (:class:`~.contact.DepthMapper` of the stage)."""
     timings_ms: dict[str, float] = field(default_factory=dict)
-    """ms per part; the contact state's time is added to ``contact`` and ``touch`` when it
-    is made"""
+    """ms per part; the time of the forces and of the contact state is added to
+    ``traction``, ``contact`` and ``touch`` when they are made"""
     slip: SlipEstimate | None = field(default_factory=SlipEstimate)
     """Of the contact pressing hardest; None where it was not estimated (nobody asked:
     :attr:`TouchStage.slip_wanted`)."""
 
+    def add_time(self, part: str, ms: float) -> None:
+        """Count ``ms`` to ``part`` and to the whole touch stage."""
+        for key in (part, "touch"):
+            self.timings_ms[key] = self.timings_ms.get(key, 0.0) + ms
+
+    @functools.cached_property
+    def force(self) -> np.ndarray:
+        """(M, 3) N on each decoded cell."""
+        start = time.perf_counter()
+        out = self.force_of()
+        self.add_time("traction", 1e3 * (time.perf_counter() - start))
+        return out
+
     @functools.cached_property
     def contact(self) -> ContactState:
         """The contact state (normal and shear force, area, centroid, depth, regions)."""
+        _ = self.force           # its time counts to traction
         start = time.perf_counter()
         state = self.contact_of()
-        spent = 1e3 * (time.perf_counter() - start)
-        for part in ("contact", "touch"):
-            self.timings_ms[part] = self.timings_ms.get(part, 0.0) + spent
+        self.add_time("contact", 1e3 * (time.perf_counter() - start))
         return state
 
     @functools.cached_property
     def depth(self) -> np.ndarray:
         """(H, W) float32 m of indentation on the depth grid, NaN where not decoded."""
         return self.depth_of(self.indent)
+
+
+def _given(value: Any) -> Any:
+    """``value`` (a lazy output already made: :func:`functools.partial` of it)."""
+    return value
 
 
 def _always() -> bool:
@@ -240,7 +261,7 @@ class TouchStage:
         self.pending_dropped = 0       # queued frames dropped: the queue was full
         self._in_contact = False
         self._last: TouchResult | None = None
-        self.last_solve: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._last_solve: tuple[np.ndarray, np.ndarray, Callable[[], Any]] | None = None
         self._index = np.full(self.shape[0] * self.shape[1], -1, np.int64)
         self._last_solver: TractionSolver | None = None
         self.solver_cache = (SolverCache(self.params.solver_cache_dir or None)
@@ -249,6 +270,18 @@ class TouchStage:
         # rest position of every cell: the reference's where it has one, else the nominal
         self._rest_table = nominal_positions(all_rows, all_cols, self.shape, self.pitch,
                                              self.mirrored)
+
+    @property
+    def last_solve(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The last frame's (disp (N, 3), valid (N,), forces (N, 3)) per reference cell.
+
+        Its displacement, which cells it decoded and its forces: the force calibration's
+        input (the forces are made here if nothing asked for them yet).
+        """
+        if self._last_solve is None:
+            return None
+        disp, valid, solved = self._last_solve
+        return disp, valid, solved()[0]
 
     # ------------------------------------------------------------------ reference
 
@@ -431,14 +464,20 @@ class TouchStage:
         self._pending.append((tag, points))
 
     def _outputs(self, points: np.ndarray) -> TouchResult | None:
-        """Touch outputs of one frame against the installed reference."""
+        """Touch outputs of one frame against the installed reference.
+
+        Made at once: the displacement, the resultant (one product of six rows) and
+        ``in_contact``. The per-cell forces, the contact state and the depth map are made on
+        first use (:class:`TouchResult`), each from this frame's data and settings.
+        """
         if len(points) == 0:
             return None
         rows = points["row"].astype(np.int64)
         cols = points["col"].astype(np.int64)
         xyz = np.column_stack([points["x"], points["y"], points["z"]]).astype(np.float64)
         ref = self.reference
-        assert self.solver is not None and ref is not None
+        solver = self.solver
+        assert solver is not None and ref is not None
         t0 = time.perf_counter()
         position = ref.pose.to_pad(xyz)
         flat = rows * self.shape[1] + cols
@@ -452,20 +491,20 @@ class TouchStage:
         disp_ref[k[known]] = displacement[known]
         valid[k[known]] = True
         if ref.weights is not None and len(ref.weights.noisy):
-            disp_ref = ref.weights.clean(self.solver.fill_missing(disp_ref, valid))
+            disp_ref = ref.weights.clean(solver.fill_missing(disp_ref, valid))
             displacement[known] = disp_ref[k[known]]
         t1 = time.perf_counter()
-        forces_ref, wrench = self.solver.solve(disp_ref, valid)
-        self.last_solve = (disp_ref, valid, forces_ref)    # per reference cell (calibration)
+        wrench, u, u32 = solver.resultant(disp_ref, valid)
+        # the per-cell forces and their window, made once when first asked for
+        solved = functools.cache(lambda w=wrench: solver.forces(u, u32, w))
+        self._last_solve = (disp_ref, valid, solved)
         t2 = time.perf_counter()
-        solver = self.solver
-        wrench_force, wrench_moment = wrench[:3], wrench[3:]
         params = self._frame_contact_params()
         ref_noise = ref.noise
-        window = solver.last_window
 
         def support() -> tuple[np.ndarray, np.ndarray] | None:
             """The constrained pressure near the contact and its noise (:mod:`.support`)."""
+            window = solved()[1]
             noise, cell_noise = params.displacement_noise, ref_noise.support
             pressure = solver.support_pressure(noise, params.support_sigmas,
                                                params.support_edge_snr, cell_noise=cell_noise,
@@ -473,12 +512,16 @@ class TouchStage:
             return None if pressure is None else (
                 pressure, noise * solver.support_gain if cell_noise is None else cell_noise)
 
-        support_of = support
+        def solved_forces() -> np.ndarray:
+            return solved()[0]
+
+        support_of, forces_of = support, solved_forces
         fit_centroid = None
         if ref.consistent is not None:
             # the normal displacement the contact's pressure explains (:mod:`.consistent`)
+            forces_ref = solved()[0]
             found = support()
-            support_of = lambda: found   # noqa: E731 - made once, here
+            support_of = functools.partial(_given, found)
             if found is not None:
                 core = found[0] > params.support_sigmas * found[1]
             else:
@@ -502,7 +545,7 @@ class TouchStage:
                 wrench[2:5] *= scale
                 forces_ref = forces_ref.copy()
                 forces_ref[:, 2] *= scale
-                wrench_force, wrench_moment = wrench[:3], wrench[3:]
+            forces_of = functools.partial(_given, forces_ref)
             fit_centroid = ref.consistent.last_centroid
         indent = np.full(self.shape, np.nan)
         indent[rows, cols] = -displacement[:, 2]
@@ -511,24 +554,30 @@ class TouchStage:
                                               params)
         nominal_xy, shape, pitch = ref.nominal[:, :2], self.shape, self.pitch
 
-        def contact() -> ContactState:
-            return contact_state(nominal_xy, solver.rows, solver.cols, forces_ref, wrench,
+        def contact(wrench: np.ndarray = wrench) -> ContactState:
+            return contact_state(nominal_xy, solver.rows, solver.cols, forces_of(), wrench,
                                  shape, pitch, indent, was_in_contact, params,
                                  ref_noise.moment, support_of(), ref_noise.map,
                                  ref_noise.centroid, fit_centroid)
 
-        force = np.zeros((len(rows), 3))
-        force[known] = forces_ref[k[known]]
+        def force() -> np.ndarray:
+            out = np.zeros((len(rows), 3))
+            out[known] = forces_of()[k[known]]
+            return out
+
         t3 = time.perf_counter()
-        slip = (self.slip.estimate(self._rest_table[flat, :2], displacement, -force[:, 2],
-                                   self._in_contact, params.area_fraction,
-                                   np.column_stack([cols, rows]))
-                if self.slip_wanted() else None)
-        t4 = time.perf_counter()
-        result = TouchResult(rows, cols, position, displacement, force, wrench_force,
-                             wrench_moment, self._in_contact, contact, indent, self._depth,
+        result = TouchResult(rows, cols, position, displacement, force, wrench[:3],
+                             wrench[3:], self._in_contact, contact, indent, self._depth,
                              {"displacement": 1e3 * (t1 - t0), "traction": 1e3 * (t2 - t1),
-                              "contact": 1e3 * (t3 - t2), "slip": 1e3 * (t4 - t3),
-                              "touch": 1e3 * (t4 - t0)}, slip)
+                              "contact": 1e3 * (t3 - t2), "slip": 0.0,
+                              "touch": 1e3 * (t3 - t0)}, None)
+        if self.slip_wanted():
+            pressing = -result.force[:, 2]
+            t4 = time.perf_counter()
+            result.slip = self.slip.estimate(self._rest_table[flat, :2], displacement,
+                                             pressing, self._in_contact,
+                                             params.area_fraction,
+                                             np.column_stack([cols, rows]))
+            result.add_time("slip", 1e3 * (time.perf_counter() - t4))
         self._last = result
         return result

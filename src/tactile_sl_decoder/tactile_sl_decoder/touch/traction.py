@@ -373,11 +373,29 @@ class TractionSolver:
         ``disp`` (N, 3) m at the reference cells; ``valid`` marks those decoded in this
         frame (the others are filled from their neighbours).  The per-cell forces are zero
         outside the contact support, never pull (f_z <= 0) and sum to the resultant force.
+        :meth:`resultant`, then :meth:`forces` (a caller may leave the second for later).
+        """
+        wrench, u, u32 = self.resultant(disp, valid)
+        return self.forces(u, u32, wrench)[0], wrench
+
+    def resultant(self, disp: np.ndarray, valid: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The resultant (6,) and the filled displacement, (3N,) float64 and float32.
+
+        One product of six rows: all a frame's wrench needs.
         """
         disp = self.fill_missing(np.asarray(disp, np.float64), np.asarray(valid, bool))
         u = disp.reshape(-1)
-        u32 = u.astype(np.float32)
-        wrench, press = self.linear_products(u, u32)
+        return self._wrench_rows @ u, u, u.astype(np.float32)
+
+    def forces(self, u: np.ndarray, u32: np.ndarray, wrench: np.ndarray
+               ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+        """Per-cell forces (N, 3) of :meth:`resultant`'s outputs, and their window.
+
+        The window (``u32`` and the cells near the contact map, None without a map) is what
+        :meth:`support_pressure` works on; it is also kept as :attr:`last_window`.
+        """
+        press = -(self._map_rows[2] @ u32).astype(np.float64)
         n = len(self.cells)
         forces = np.zeros((n, 3))
         self.last_support = np.zeros(n, bool)
@@ -386,7 +404,7 @@ class TractionSolver:
         threshold = max(self.params.support_floor, self.params.support_fraction * peak)
         core = press > threshold
         if wrench[2] >= 0.0 or not core.any():   # nothing presses overall: no contact map
-            return forces, wrench
+            return forces, None
         grid: np.ndarray = np.zeros(self.shape, np.uint8)
         grid[self.rows[core], self.cols[core]] = 1
         grid = cv2.dilate(grid, np.ones((3, 3), np.uint8))
@@ -401,7 +419,7 @@ class TractionSolver:
             shear = _band_rows(self._map_rows[axis], start, stop, keep - start,
                                u32).astype(np.float64)
             forces[keep, axis] = shear + (wrench[axis] - shear.sum()) * weight
-        return forces, wrench
+        return forces, self._near
 
     @property
     def has_support(self) -> bool:
