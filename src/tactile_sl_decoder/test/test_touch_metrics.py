@@ -57,7 +57,7 @@ def _result(truth, dforce=(0.0, 0.0, 0.0), dmz=0.0, darea=0.0, dcen=(0.0, 0.0), 
     return TouchResult(rows, cols, truth.position[keep], disp, lambda: force,
                        np.asarray(truth.force) + dforce,
                        np.array([0.0, 0.0, truth.moment[2] + dmz]), contact.in_contact,
-                       lambda: contact, np.zeros((5, 5)))
+                       lambda: contact, np.zeros((5, 5)), lambda indent: indent)
 
 
 def test_displacement_rmse_matches_cells_by_row_and_col():
