@@ -19,14 +19,14 @@ cpu+touch counts the worker's CPU time too.
 With touch outputs (the default; --no-touch leaves them out) the touch stage runs after
 every frame as in the node and replay ("touch", of which "traction" is the inversion,
 "contact" the contact state and "slip" the slip estimate, every output made as replay
-writes them: a live node makes the contact state and the depth map only while something
-subscribes to them; "total+touch"; "cpu+touch" is the process CPU time of both). In the
-same run and on the same frames: the floor, the work no decoder of this design can avoid
-(threshold + connected components of both images, one batched classifier pass over the
-patches the frame had to classify -- all of them with carry off, those not carried with
-carry on --, triangulation of the matched cells, the touch stage's two matrix-vector
-products), on one thread and with the two images' labelling in
-two threads, and total / floor (see docs/decoder.md, "Floor and total / floor").
+writes them: a live node makes the per-cell forces, the contact state and the depth map
+only while something subscribes to them; "total+touch"; "cpu+touch" is the process CPU time
+of both). In the same run and on the same frames: the floor, the work no decoder of this
+design can avoid (threshold + connected components of both images, one batched classifier
+pass over the patches the frame had to classify -- all of them with carry off, those not
+carried with carry on --, triangulation of the matched cells, the touch stage's two
+matrix-vector products), on one thread and with the two images' labelling in two threads,
+and total / floor (see docs/decoder.md, "Floor and total / floor").
 Each bag runs from its first frame in bag order, once per repetition, so labels are carried
 from frame to frame as from a camera (--carry on, the default; off: every glyph classified
 every frame; both: the two alternate pass by pass). --sequence benchmarks the camera-rate

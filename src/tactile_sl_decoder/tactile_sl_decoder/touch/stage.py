@@ -184,11 +184,6 @@ class TouchResult:
         return self.depth_of(self.indent)
 
 
-def _given(value: Any) -> Any:
-    """``value`` (a lazy output already made: :func:`functools.partial` of it)."""
-    return value
-
-
 def _always() -> bool:
     return True
 
@@ -416,9 +411,8 @@ class TouchStage:
         A frame's contact state may be made after a later live change (on first use), and
         must use the settings of its frame.
         """
-        contact = self.params.contact
-        return dataclasses.replace(contact,
-                                   area_fraction=contact.area_fraction or self._area_fraction)
+        return dataclasses.replace(self.params.contact,
+                                   area_fraction=self.contact_params.area_fraction)
 
     # ------------------------------------------------------------------ frames
 
@@ -498,6 +492,7 @@ class TouchStage:
         params = self._frame_contact_params()
         ref_noise = ref.noise
 
+        @functools.cache
         def support() -> tuple[np.ndarray, np.ndarray] | None:
             """The constrained pressure near the contact and its noise (:mod:`.support`)."""
             window = solved()[1]
@@ -508,16 +503,16 @@ class TouchStage:
             return None if pressure is None else (
                 pressure, noise * solver.support_gain if cell_noise is None else cell_noise)
 
-        def solved_forces() -> np.ndarray:
-            return solved()[0]
+        scaled: np.ndarray | None = None        # the forces with a fitted normal force
 
-        support_of, forces_of = support, solved_forces
+        def forces_of() -> np.ndarray:
+            return solved()[0] if scaled is None else scaled
+
         fit_centroid = None
         if ref.consistent is not None:
             # the normal displacement the contact's pressure explains (:mod:`.consistent`)
             forces_ref = solved()[0]
             found = support()
-            support_of = functools.partial(_given, found)
             if found is not None:
                 core = found[0] > params.support_sigmas * found[1]
             else:
@@ -539,9 +534,8 @@ class TouchStage:
                 scale = normal / -float(wrench[2])
                 wrench = wrench.copy()
                 wrench[2:5] *= scale
-                forces_ref = forces_ref.copy()
-                forces_ref[:, 2] *= scale
-            forces_of = functools.partial(_given, forces_ref)
+                scaled = forces_ref.copy()
+                scaled[:, 2] *= scale
             fit_centroid = ref.consistent.last_centroid
         indent = np.full(self.shape, np.nan)
         indent[rows, cols] = -displacement[:, 2]
@@ -553,7 +547,7 @@ class TouchStage:
         def contact(wrench: np.ndarray = wrench) -> ContactState:
             return contact_state(nominal_xy, solver.rows, solver.cols, forces_of(), wrench,
                                  shape, pitch, indent, was_in_contact, params,
-                                 ref_noise.moment, support_of(), ref_noise.map,
+                                 ref_noise.moment, support(), ref_noise.map,
                                  ref_noise.centroid, fit_centroid)
 
         def force() -> np.ndarray:

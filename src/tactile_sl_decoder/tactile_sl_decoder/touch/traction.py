@@ -363,9 +363,11 @@ class TractionSolver:
         (the map is stored in float32: it is memory-bound).  Everything else :meth:`solve`
         does is per support cell; ``tools/bench_pipeline.py`` times these as the floor.
         """
-        wrench = self._wrench_rows @ u
-        press = -(self._map_rows[2] @ u32).astype(np.float64)
-        return wrench, press
+        return self._wrench_rows @ u, self._normal_map(u32)
+
+    def _normal_map(self, u32: np.ndarray) -> np.ndarray:
+        """Each cell's pressing normal map force (N,), float64, of a float32 displacement."""
+        return -(self._map_rows[2] @ u32).astype(np.float64)
 
     def solve(self, disp: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per-cell forces (N, 3) N and the resultant (6,) = (F, M about the pad origin).
@@ -393,9 +395,9 @@ class TractionSolver:
         """Per-cell forces (N, 3) of :meth:`resultant`'s outputs, and their window.
 
         The window (``u32`` and the cells near the contact map, None without a map) is what
-        :meth:`support_pressure` works on; it is also kept as :attr:`last_window`.
+        :meth:`support_pressure` works on.
         """
-        press = -(self._map_rows[2] @ u32).astype(np.float64)
+        press = self._normal_map(u32)
         n = len(self.cells)
         forces = np.zeros((n, 3))
         self.last_support = np.zeros(n, bool)
@@ -426,15 +428,6 @@ class TractionSolver:
         """The constrained inversion is prepared (``support_weight`` > 0)."""
         return self._support_rows is not None
 
-    @property
-    def last_window(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """What :meth:`support_pressure` works on, from the last :meth:`solve`.
-
-        Its displacement (float32, flattened) and the cells near its contact map; None
-        without a map.
-        """
-        return self._near
-
     def support_pressure(self, noise: float, sigmas: float, min_snr: float,
                          max_rounds: int = 30, cell_noise: np.ndarray | None = None,
                          window: tuple[np.ndarray, np.ndarray] | None = None
@@ -452,8 +445,8 @@ class TractionSolver:
         (compiled); after ``max_rounds`` a cell still pulling is clipped to zero.
         ``cell_noise`` (N,): each cell's noise (N) instead of ``noise`` x
         :attr:`support_gain` (the cells' own expected errors: :mod:`.weights`).
-        ``window``: a frame's :attr:`last_window` (default: the last solve's), so that the
-        pressure of a frame can be made after later frames were solved.
+        ``window``: a frame's window from :meth:`forces` (default: the last one's), so that
+        the pressure of a frame can be made after later frames were solved.
         """
         near = self._near if window is None else window
         if self._support_rows is None or near is None or len(near[1]) == 0:
