@@ -25,7 +25,11 @@ thread where there are fewer than two cores per sensor); ``--param`` overrides i
 
 Also printed: CPU use of every decoder and replay process over the run (per cent of one
 CPU) and their resident memory when the first cloud arrives and at the end, each with its
-descendants (the decoder's camera worker processes).
+descendants (the decoder's camera worker processes); and, measured before the nodes start,
+the machine's speed at that moment: the median time of the adaptive threshold and connected
+components of the bag's first stereo pair on one thread (the floor's first part in
+``bench_pipeline.py``).  A shared VM's speed moves by 1.5x and more within hours, and that
+figure lets runs of different sittings be compared.
 """
 from __future__ import annotations
 
@@ -64,6 +68,27 @@ def _frame_rate(bag: pathlib.Path) -> float:
     if len(times) < 2 or times[-1] <= times[0]:
         return 10.0
     return (len(times) - 1) / ((times[-1] - times[0]) * 1e-9)
+
+
+def _speed_reference(bag: pathlib.Path, repeat: int = 40) -> float:
+    """Median ms of threshold + connected components of the bag's first stereo pair."""
+    import cv2
+
+    from tactile_sl_common.images import to_gray
+    from tactile_sl_decoder.extract.extraction import ExtractionParams, threshold_ink
+    from tactile_sl_decoder.frames import bag_frames
+
+    frame = next(iter(bag_frames(bag, ground_truth=False, camera_info=False)))
+    grays = [to_gray(frame.left_image), to_gray(frame.right_image)]
+    params = ExtractionParams(open_size=0)
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for gray in grays:
+            cv2.connectedComponentsWithStatsWithAlgorithm(threshold_ink(gray, params), 8,
+                                                          cv2.CV_32S, cv2.CCL_BBDT)
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times))
 
 
 def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, report
@@ -110,6 +135,7 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
     shared = [] if args.chain else [f"{k}:={str(v).lower()}" for k, v in
                                     decoder_overrides(args.sensors, os.cpu_count()).items()]
 
+    speed_ms = _speed_reference(args.bag)
     context = Context()
     rclpy.init(context=context, domain_id=args.domain_id)
     node = rclpy.create_node("bench_graph", context=context)
@@ -206,6 +232,8 @@ def main() -> int:  # noqa: C901 - one measurement run: processes, spin loop, re
           f"frames of {args.bag.name} each at {bag_hz * args.rate:.0f} Hz, Fast DDS profile "
           f"{os.environ.get('FASTRTPS_DEFAULT_PROFILES_FILE') or 'none'}, load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
+    print(f"machine speed before the run: threshold + connected components of the bag's "
+          f"first stereo pair, one thread, {speed_ms:.2f} ms (median of 40)")
     if shared or args.param:
         print(f"decoder parameters: {' '.join([*shared, *args.param])}"
               f"{' (the first as sensors.launch.py sets them here)' if shared else ''}")
