@@ -41,7 +41,7 @@ def test_grey_moments_give_the_matrix_products_bits(dark):
     for radius in (0.45, 0.3):
         doubled = ce._doubled_kernels(18, radius)
         assert doubled is not None
-        mine = ce._grey_moments(flat, thresh, doubled, dark)
+        mine = ce._grey_moments(flat, thresh, doubled, dark, ce._RECIPROCALS)
         ref = ce._grey_moments_reference(flat, thresh, ce._centroid_kernels(18, radius), dark)
         assert np.array_equal(mine[0], ref[0]) and np.array_equal(mine[1], ref[1])
 
@@ -62,3 +62,28 @@ def test_centroids_fall_back_on_numpy_where_the_kernel_is_not_exact(monkeypatch)
 
 def test_the_self_check_holds_on_this_machine():
     assert ce._planes_kernel_is_exact()
+
+
+@pytest.mark.parametrize("gradient", [0.03, -0.03])
+def test_centres_follow_the_reflectance_under_an_illumination_gradient(gradient):
+    """A bar lit by a light that falls off across it keeps its centre.
+
+    Image = illumination x reflectance: with weights not divided by the threshold, the
+    bar's long axis (sigma^2 ~ 8 px^2) times the 3 %/px gradient would lean the centre by
+    ~0.25 px towards the brighter side.
+    """
+    size = 18
+    g = np.arange(size) - (size - 1) / 2.0
+    x, y = np.meshgrid(g, g)
+    # a horizontal bar 10 px long, 3 px wide, soft edges, centred on the patch
+    bar = (1 / (1 + np.exp((np.abs(x) - 5.0) / 0.4))) * (1 / (1 + np.exp((np.abs(y) - 1.5) / 0.4)))
+    reflectance = 1.0 - 0.85 * bar
+    light = 180.0 * (1.0 + gradient * x)
+    patch = np.clip(np.rint(light * reflectance), 0, 255).astype(np.uint8)[None]
+    for flatten in (True, False):
+        du, dv = ce.patch_centroid_offset(patch, flatten=flatten)
+        if flatten:    # the plane threshold follows the light: the reflectance's centre
+            assert abs(du[0]) < 0.03 and abs(dv[0]) < 0.03
+    unnormalised = np.clip(180.0 - patch[0].astype(float), 0, None) * (x ** 2 + y ** 2 <= 8.1 ** 2)
+    lean = (unnormalised * x).sum() / unnormalised.sum()
+    assert abs(lean) > 0.15     # what the weights would do without the division
