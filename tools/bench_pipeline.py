@@ -21,10 +21,13 @@ every frame as in the node and replay ("touch", of which "traction" is the inver
 "contact" the contact state and "slip" the slip estimate, every output made as replay
 writes them: a live node makes the per-cell forces, the contact state and the depth map
 only while something subscribes to them; "total+touch"; "cpu+touch" is the process CPU time
-of both). In the same run and on the same frames: the floor, the work no decoder of this
-design can avoid (threshold + connected components of both images, one batched classifier
-pass over the patches the frame had to classify -- all of them with carry off, those not
-carried with carry on --, triangulation of the matched cells, the touch stage's two
+of both).  ``--touch-outputs wrench`` times what a live node does for a listener of
+``wrench`` alone (a grasp controller): the resultant, no per-cell forces, contact state,
+depth map or slip estimate.  In the same run and on the same frames: the floor, the work no
+decoder of this design can avoid (threshold + connected components of both images, one
+batched classifier pass over the patches the frame had to classify -- all of them with
+carry off, those not carried with carry on --, triangulation of the matched cells, the
+touch stage's two
 matrix-vector products), on one thread and with the two images' labelling in two threads,
 and total / floor (see docs/decoder.md, "Floor and total / floor").
 Each bag runs from its first frame in bag order, once per repetition, so labels are carried
@@ -248,6 +251,9 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
                 step = _sensor_step(pipe, args.touch)   # a fresh touch reference per pass
                 step.forget_frames()
                 stage = step.touch.stage if step.touch is not None else None
+                every_output = args.touch_outputs == "all"
+                if stage is not None and not every_output:
+                    stage.slip_wanted = lambda: False  # as the node without a slip listener
                 metrics = []
                 for fr, left, right in frames:
                     c0 = _cpu_seconds(pipe)
@@ -255,7 +261,7 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
                     out = step.process(left, right, fr.left_info, fr.right_info,
                                        on_points=points_ready)
                     res, touch = out.stereo, out.touch.result
-                    if touch is not None:     # every output, as replay writes them
+                    if touch is not None and every_output:   # as replay writes them
                         _ = touch.contact, touch.depth
                     t2 = time.perf_counter()
                     c1 = _cpu_seconds(pipe)
@@ -304,6 +310,11 @@ def in_process(args: argparse.Namespace) -> int:  # noqa: C901 - a report script
           f"cpu_threads={args.cpu_threads}, "
           f"{time.perf_counter() - t_run:.0f} s; load average {load0[0]:.2f} before, "
           f"{load1[0]:.2f} after, on {os.cpu_count()} CPUs")
+    if args.touch:
+        print("touch outputs made per frame: " + (
+            "all (per-cell forces, contact state, depth map, slip), as replay writes them"
+            if args.touch_outputs == "all" else
+            "the wrench only, as the node makes it for a wrench listener alone"))
     for mode in modes:
         print(f"labels carried from the previous frame: {mode} (median "
               f"{100 * np.median(carried[mode]):.1f} % of the glyphs per pair)")
@@ -530,6 +541,9 @@ def main() -> int:
     p.add_argument("--no-touch", dest="touch", action="store_false",
                    help="time the pipeline alone (default: also the touch stage, "
                    "TouchStage.update after every frame, as the node and replay)")
+    p.add_argument("--touch-outputs", choices=("all", "wrench"), default="all",
+                   help="touch outputs made per frame: all (as replay writes them; default) "
+                        "or only the wrench (as the node for a wrench listener alone)")
     p.add_argument("--flip", type=float, default=0.0, help="label-flip robustness run")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--ros", action="store_true", help="measure through the ROS graph")
