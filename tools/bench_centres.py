@@ -5,7 +5,8 @@ The robustness sweep's clean rows sit at 2.5-4 x their Cramer-Rao bound (docs/ro
 and the bound takes each glyph's rendered image as known.  This asks what that image itself
 says: the simulator renders a still pad without noise, once with every glyph, once with
 none and nine times with every third row and column of glyphs (``Renderer.render(...,
-ink_cells=..., linear=True)``, as the bound does), and for each glyph compares with its
+ink_cells=..., linear=True)``: :func:`~tactile_sl_decoder.tooling.centre_bound.
+glyph_shares`, as the bound does), and for each glyph compares with its
 projected cell centre (the truth):
 
 * the centroid of its own image share (paper minus print: the ink's darkening), as grey
@@ -49,6 +50,7 @@ def main() -> int:
     args = parser.parse_args()
 
     from tactile_sl_decoder.extract.extraction import extract_symbols
+    from tactile_sl_decoder.tooling.centre_bound import glyph_shares
     from tactile_sl_decoder.tooling.training import DEFAULT_PRIMITIVES, artwork_values
     from tactile_sl_sim.artwork import load_artwork
     from tactile_sl_sim.optics import RigParams, SimulatedCameraPair
@@ -64,35 +66,26 @@ def main() -> int:
     renderer = Renderer(art, SimulatedCameraPair(rig), supersample=args.supersample)
     nz = Nuisances.from_dict({"blur_sigma": args.blur, "noise_sigma": 0.0, "shot_noise": 0.0,
                               "vignetting": args.vignetting})
-    cells = art.rows * art.cols
-    cell_row, cell_col = np.divmod(np.arange(cells), art.cols)
-
-    def render(ink: np.ndarray | None, linear: bool = True):
-        return renderer.render([], nz, seed=1, frame_index=0, ink_cells=ink, linear=linear)
-
-    blank, frame = render(np.zeros(cells, bool)), render(None, linear=False)
-    truth = frame.truth
+    frame = renderer.render([], nz, seed=1, frame_index=0)      # the 8-bit images
+    full, shares = glyph_shares(renderer, [], nz, seed=1, frame_index=0)
+    truth = full.truth
     half = int(0.6 * args.spacing + 3)      # the glyph's blurred footprint, no other glyph
     rows: dict[int, list[tuple[float, ...]]] = {0: [], 1: []}
-    for a in range(3):
-        for b in range(3):
-            sel = np.flatnonzero(truth.visible & (truth.rows % 3 == a) & (truth.cols % 3 == b))
-            part = render((cell_row % 3 == a) & (cell_col % 3 == b))
-            for side, (own, paper, px) in enumerate(((part.left, blank.left, truth.px_left),
-                                                     (part.right, blank.right, truth.px_right))):
-                ink = np.clip(paper - own, 0.0, None).astype(np.float64)
-                removed = ink / np.maximum(paper, 1e-3)
-                for k in sel:
-                    u, v = px[k]
-                    iu, iv = int(round(u)), int(round(v))
-                    if min(iu, iv) < half or iu + half >= ink.shape[1] or iv + half >= ink.shape[0]:
-                        continue
-                    win = (slice(iv - half, iv + half + 1), slice(iu - half, iu + half + 1))
-                    ys, xs = np.mgrid[win]
-                    out = [truth.rows[k], truth.cols[k], u, v]
-                    for w in (ink[win], removed[win]):
-                        out += [(xs * w).sum() / w.sum() - u, (ys * w).sum() / w.sum() - v]
-                    rows[side].append(tuple(out))
+    for sel, side, share, paper in shares:
+        px = truth.px_left if side == 0 else truth.px_right
+        ink = np.clip(-share, 0.0, None).astype(np.float64)     # the ink's darkening
+        removed = ink / np.maximum(paper, 1e-3)                  # ... as reflectance
+        for k in np.flatnonzero(sel & truth.visible):
+            u, v = px[k]
+            iu, iv = int(round(u)), int(round(v))
+            if min(iu, iv) < half or iu + half >= ink.shape[1] or iv + half >= ink.shape[0]:
+                continue
+            win = (slice(iv - half, iv + half + 1), slice(iu - half, iu + half + 1))
+            ys, xs = np.mgrid[win]
+            out = [truth.rows[k], truth.cols[k], u, v]
+            for w in (ink[win], removed[win]):
+                out += [(xs * w).sum() / w.sum() - u, (ys * w).sum() / w.sum() - v]
+            rows[side].append(tuple(out))
     print(f"still pad, noise-free, spacing {args.spacing:g} px, supersample "
           f"{args.supersample}, blur {args.blur:g} px, vignetting {args.vignetting:g}"
           f"{', no distortion' if args.no_distortion else ''}"

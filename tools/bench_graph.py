@@ -72,21 +72,18 @@ def _frame_rate(bag: pathlib.Path) -> float:
 
 def _speed_reference(bag: pathlib.Path, repeat: int = 40) -> float:
     """Median ms of threshold + connected components of the bag's first stereo pair."""
-    import cv2
+    from bench_pipeline import ink_regions
 
     from tactile_sl_common.images import to_gray
-    from tactile_sl_decoder.extract.extraction import ExtractionParams, threshold_ink
     from tactile_sl_decoder.frames import bag_frames
 
     frame = next(iter(bag_frames(bag, ground_truth=False, camera_info=False)))
     grays = [to_gray(frame.left_image), to_gray(frame.right_image)]
-    params = ExtractionParams(open_size=0)
     times = []
     for _ in range(repeat):
         t0 = time.perf_counter()
         for gray in grays:
-            cv2.connectedComponentsWithStatsWithAlgorithm(threshold_ink(gray, params), 8,
-                                                          cv2.CV_32S, cv2.CCL_BBDT)
+            ink_regions(gray)
         times.append(time.perf_counter() - t0)
     return 1e3 * float(np.median(times))
 

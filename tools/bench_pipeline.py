@@ -27,9 +27,8 @@ depth map or slip estimate.  In the same run and on the same frames: the floor, 
 decoder of this design can avoid (threshold + connected components of both images, one
 batched classifier pass over the patches the frame had to classify -- all of them with
 carry off, those not carried with carry on --, triangulation of the matched cells, the
-touch stage's two
-matrix-vector products), on one thread and with the two images' labelling in two threads,
-and total / floor (see docs/decoder.md, "Floor and total / floor").
+touch stage's two matrix-vector products), on one thread and with the two images'
+labelling in two threads, and total / floor (see docs/decoder.md, "Floor and total / floor").
 Each bag runs from its first frame in bag order, once per repetition, so labels are carried
 from frame to frame as from a camera (--carry on, the default; off: every glyph classified
 every frame; both: the two alternate pass by pass). --sequence benchmarks the camera-rate
@@ -128,6 +127,20 @@ def _pipeline(args: argparse.Namespace, carry: bool = True):
     return StereoPipeline(PatternSpec.load(args.pattern), None, params)
 
 
+def ink_regions(gray: np.ndarray) -> int:
+    """The floor's first part for one image: adaptive threshold (no opening) and labelling.
+
+    Returns the number of labels.  ``bench_graph.py`` times it as the machine's speed.
+    """
+    import cv2
+
+    from tactile_sl_decoder.extract.extraction import ExtractionParams, threshold_ink
+
+    mask = threshold_ink(gray, ExtractionParams(open_size=0))
+    return cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, cv2.CV_32S,
+                                                         cv2.CCL_BBDT)[0]
+
+
 class Floor:
     """The unavoidable work of one stereo pair, timed on the same frames as the pipeline.
 
@@ -146,20 +159,8 @@ class Floor:
     def __init__(self, pipe, parallel: bool) -> None:
         from concurrent.futures import ThreadPoolExecutor
 
-        from tactile_sl_decoder.extract.extraction import ExtractionParams
-
         self.pipe = pipe
-        self.params = ExtractionParams(open_size=0)
         self.pool = ThreadPoolExecutor(max_workers=1) if parallel else None
-
-    def _regions(self, gray: np.ndarray) -> int:
-        import cv2
-
-        from tactile_sl_decoder.extract.extraction import threshold_ink
-
-        mask = threshold_ink(gray, self.params)
-        return cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, cv2.CV_32S,
-                                                             cv2.CCL_BBDT)[0]
 
     def __call__(self, left: np.ndarray, right: np.ndarray, res, rig, solver,
                  disp: np.ndarray | None) -> dict[str, float]:
@@ -181,11 +182,11 @@ class Floor:
         patches = patches[:max(len(patches) - res.carried, 0)]
         t0 = time.perf_counter()
         if self.pool is None:
-            self._regions(left)
-            self._regions(right)
+            ink_regions(left)
+            ink_regions(right)
         else:
-            fut = self.pool.submit(self._regions, right)
-            self._regions(left)
+            fut = self.pool.submit(ink_regions, right)
+            ink_regions(left)
             fut.result()
         t1 = time.perf_counter()
         classifier.predict(patches)

@@ -29,7 +29,7 @@ No rclpy.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 from scipy.ndimage import correlate1d
@@ -124,6 +124,34 @@ def frame_point_bounds(renderer: Any, rig: Any, contacts: Any, nuisances: Any, s
     footprint and no other printed glyph. Returns the glyphs in the truth's order (visible,
     undamaged ones).
     """
+    full, shares = glyph_shares(renderer, contacts, nuisances, seed, frame_index)
+    t = full.truth
+    keep = t.visible & ~t.damaged if t.damaged is not None else t.visible
+    half = int(np.ceil(1.5 * spacing_px))
+    read, shot = float(nuisances.noise_sigma), float(nuisances.shot_noise)
+    covs = np.full((2, len(t.rows), 2, 2), np.inf)
+    for sel, side, share, _paper in shares:
+        sel = sel & keep
+        if not sel.any():
+            continue
+        img, px = (full.left, t.px_left) if side == 0 else (full.right, t.px_right)
+        covs[side, sel] = centre_covariance_bound(img, px[sel], half, read, shot,
+                                                  glyph_signal=share)
+    return point_error_bound(rig, t.px_left[keep], t.px_right[keep], covs[0, keep],
+                             covs[1, keep])
+
+
+def glyph_shares(renderer: Any, contacts: Any, nuisances: Any, seed: int,
+                 frame_index: int) -> tuple[Any, Iterator[tuple[np.ndarray, int, np.ndarray,
+                                                                  np.ndarray]]]:
+    """A frame's linear signal and, lazily, every glyph's own share of it.
+
+    Returns the full linear render (its truth names the glyphs) and an iterator of
+    (selected glyphs (bool over the truth's), camera index 0 / 1, share, paper): ``share``
+    is the signal with only every third row and column of glyphs printed minus ``paper``,
+    the signal without any glyph (the image is linear in the print), so no other printed
+    glyph lies within 1.5 spacings of a selected one.  Nine such renders cover every glyph.
+    """
     def linear(ink: np.ndarray | None) -> Any:
         return renderer.render(contacts, nuisances, seed=seed, frame_index=frame_index,
                                ink_cells=ink, linear=True)
@@ -131,25 +159,20 @@ def frame_point_bounds(renderer: Any, rig: Any, contacts: Any, nuisances: Any, s
     rows, cols = renderer.artwork.rows, renderer.artwork.cols
     full = linear(None)
     t = full.truth
-    keep = t.visible & ~t.damaged if t.damaged is not None else t.visible
-    blank = linear(np.zeros(rows * cols, bool))
-    cell_row, cell_col = np.divmod(np.arange(rows * cols), cols)
-    half = int(np.ceil(1.5 * spacing_px))
-    read, shot = float(nuisances.noise_sigma), float(nuisances.shot_noise)
-    covs = np.full((2, len(t.rows), 2, 2), np.inf)
-    for a in range(3):
-        for b in range(3):
-            sel = keep & (t.rows % 3 == a) & (t.cols % 3 == b)
-            if not sel.any():
-                continue
-            part = linear((cell_row % 3 == a) & (cell_col % 3 == b))
-            for side, (img, own, base, px) in enumerate((
-                    (full.left, part.left, blank.left, t.px_left),
-                    (full.right, part.right, blank.right, t.px_right))):
-                covs[side, sel] = centre_covariance_bound(img, px[sel], half, read, shot,
-                                                          glyph_signal=own - base)
-    return point_error_bound(rig, t.px_left[keep], t.px_right[keep], covs[0, keep],
-                             covs[1, keep])
+
+    def shares() -> Iterator[tuple[np.ndarray, int, np.ndarray, np.ndarray]]:
+        blank = linear(np.zeros(rows * cols, bool))
+        cell_row, cell_col = np.divmod(np.arange(rows * cols), cols)
+        for a in range(3):
+            for b in range(3):
+                sel = (t.rows % 3 == a) & (t.cols % 3 == b)
+                if not sel.any():
+                    continue
+                part = linear((cell_row % 3 == a) & (cell_col % 3 == b))
+                yield sel, 0, part.left - blank.left, blank.left
+                yield sel, 1, part.right - blank.right, blank.right
+
+    return full, shares()
 
 
 def _points(rig: Any, uv_left: np.ndarray, uv_right: np.ndarray) -> np.ndarray:
