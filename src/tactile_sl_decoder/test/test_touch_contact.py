@@ -23,7 +23,7 @@ from tactile_sl_decoder.touch.contact import (
 _DR, _DC = (a.ravel() for a in np.mgrid[-1:2, -1:2])
 
 
-def reference_max_indentation(indent, noise=3e-6):
+def reference_max_indentation(indent, noise=3e-6, spread=0.0):
     """The numpy version the compiled kernel is written from."""
     valid = np.isfinite(indent)
     if not valid.any():
@@ -78,12 +78,13 @@ def reference_max_indentation(indent, noise=3e-6):
     grad = c[1:3]
     curvature, axes = np.linalg.eigh(hessian)
     step = np.zeros(2)
-    gain = 0.0
+    gain = bent = 0.0
     for lam, axis in zip(curvature, axes.T):
         if lam < -CURVATURE_SIGMAS * _CURVATURE_SPREAD * noise:
             slope = float(grad @ axis)
             step += (-slope / lam) * axis
             gain += -slope * slope / (2.0 * lam)
+            bent += lam
     if gain > 0 and np.all(np.abs(step) <= 1.0):
         consistent = True
         checked = 0
@@ -95,7 +96,7 @@ def reference_max_indentation(indent, noise=3e-6):
                           + c[5] * dc * dr)
                 consistent &= abs(z.flat[at] - q) <= 4.0 * noise + 0.5 * abs(c[0] - q)
         if consistent and checked >= 2:
-            peak += gain
+            peak += gain - 0.5 * spread * spread * bent
     return max(peak, 0.0)
 
 
@@ -123,8 +124,9 @@ def test_compiled_max_indentation_equals_the_numpy_version():
     rng = np.random.default_rng(1)
     for i in range(800):
         g = _random_grid(rng, i % 4)
-        assert max_indentation(g, 3e-6) == pytest.approx(reference_max_indentation(g, 3e-6),
-                                                         abs=1e-15)
+        spread = (0.0, 0.25, 0.6)[i % 3]
+        assert max_indentation(g, 3e-6, spread) == pytest.approx(
+            reference_max_indentation(g, 3e-6, spread), abs=1e-15)
 
 
 def test_max_indentation_finds_a_paraboloid_peak_between_cells():
@@ -141,6 +143,23 @@ def test_max_indentation_finds_a_paraboloid_peak_between_cells():
     assert max_indentation(flat) == 0.0
     bulge = -np.ones((5, 5)) * 1e-6
     assert max_indentation(bulge) == 0.0
+
+
+def test_max_indentation_undoes_the_glyph_average_of_a_dome():
+    """A decoded point averages the surface over its glyph: a dome's cells read shallower."""
+    r, c = np.mgrid[0:9, 0:9].astype(float)
+    dome = 850e-6 - 15e-6 * ((r - 4.3) ** 2 + (c - 3.6) ** 2)
+    # the average over a glyph of spread s (cells, per axis): + s^2 / 2 x the Laplacian
+    spread = 0.25
+    seen = dome + 0.5 * spread ** 2 * (-60e-6)
+    assert max_indentation(seen, 3e-6) == pytest.approx(850e-6 - 1.875e-6, abs=1e-9)
+    assert max_indentation(seen, 3e-6, spread) == pytest.approx(850e-6, abs=1e-9)
+    # a flat face has no curvature to undo; a cylinder's crest only along its one curvature
+    face = np.full((9, 9), 845e-6)
+    assert max_indentation(face, 3e-6, spread) == pytest.approx(845e-6, abs=1e-12)
+    crest = 700e-6 - 20e-6 * (c - 3.6) ** 2
+    assert max_indentation(crest, 3e-6, spread) == pytest.approx(
+        700e-6 + 0.5 * spread ** 2 * 40e-6, abs=1e-9)
 
 
 def test_max_indentation_leaves_out_cells_a_decoder_got_wrong():
