@@ -32,11 +32,12 @@ def test_bench_pipeline_in_process_runs_with_floor_touch_and_both_carry_settings
 
 
 def test_bench_touch_prints_the_slip_table_and_times():
-    """The touch bags and one slip scene (rendered on the fly): the slip table with its
-    acceptance lines and the slip estimate's time beside the pipeline's."""
+    """The touch bags, one slip scene and the lighting scenes (rendered on the fly): the
+    slip table with its acceptance lines, the lighting table and the slip estimate's time
+    beside the pipeline's (the shape scenes' table: test_touch_metrics)."""
     out = subprocess.run(
         [sys.executable, str(REPO / "tools" / "bench_touch.py"), "--repeat", "1",
-         "--only", "slip_halfspace"],
+         "--only", "slip_halfspace", "--no-shapes"],
         capture_output=True, text=True, timeout=300, env=ros_env(next_domain_id()))
     assert out.returncode == 0, out.stderr[-3000:]
     for section in ("slip_halfspace", "gross slip:", "slip margin |error|",

@@ -16,7 +16,9 @@ from tactile_sl_decoder.tooling.touch_metrics import (
     compare_frame,
     displacement_rmse,
     format_report,
+    format_shape_report,
     resolve_sensor,
+    shape_checks,
 )
 from tactile_sl_decoder.touch.contact import ContactState
 from tactile_sl_decoder.touch.stage import TouchResult
@@ -90,6 +92,17 @@ def test_known_errors_and_limits():
     # 5 % + 5 mN: 1 N may be off by 55 mN, not by 56 mN
     assert compare_frame(_result(truth, dforce=(0, 0, -0.0549)), truth).checks()["normal"]
     assert not compare_frame(_result(truth, dforce=(0, 0, -0.0551)), truth).checks()["normal"]
+
+
+def test_shape_limits_and_report():
+    """Issue 25's indenter limits: area within 15 %, largest indentation within 10 um."""
+    truth = _truth()
+    good = compare_frame(_result(truth, darea=0.14 * truth.area, ddepth=-9.9e-6), truth)
+    deep = compare_frame(_result(truth, darea=-0.16 * truth.area, ddepth=10.1e-6), truth)
+    assert shape_checks(good) == [] and shape_checks(deep) == ["area", "depth"]
+    text = format_shape_report([("shape_sphere_small", [good, deep])])
+    assert "shape_sphere_small" in text and "FAIL area,depth" in text
+    assert "|dDep|  10.1 um, 1/2 frames within the limits" in text
 
 
 def test_in_contact_rules():
