@@ -254,10 +254,11 @@ def _fit(z: np.ndarray, r: int, c: int, limit: float, coef: np.ndarray,
 
 @helper
 def _gain(cf: np.ndarray, threshold: float) -> tuple[float, float, float, float]:
-    """(x, y) step to the stationary point along the curvatures below ``threshold``, etc.
+    """Step (x, y) to the stationary point along the curvatures below ``threshold``.
 
-    Returns the step, the rise to that point and the sum of those curvatures; the
-    eigen-decomposition of the Hessian [[2d, g], [g, 2e]] in closed form.
+    Returns the step, the rise to that point and the sum of those curvatures (the glyph
+    average's correction); the eigen-decomposition of the Hessian [[2d, g], [g, 2e]] in
+    closed form.
     """
     h11, h22, h12 = 2.0 * cf[3], 2.0 * cf[4], cf[5]
     mean = 0.5 * (h11 + h22)
