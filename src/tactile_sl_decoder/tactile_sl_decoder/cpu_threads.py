@@ -6,8 +6,11 @@ library to the threads it asks for. These settings are process-wide.
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import sys
+import threading
+from typing import Any, Iterator
 
 import cv2
 
@@ -29,6 +32,33 @@ def set_cpu_threads(n: int) -> None:
 
 
 _BLAS_THREADS: list[int] = []      # the thread count last given to the loaded OpenBLAS copies
+_SET_NAMES = ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
+              "openblas_set_num_threads64_", "openblas_set_num_threads")
+_GET_NAMES = ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads",
+              "openblas_get_num_threads64_", "openblas_get_num_threads")
+
+
+def _openblas_copies() -> list[tuple[Any, Any]]:
+    """(set, get) thread-count functions of every OpenBLAS copy loaded in this process."""
+    try:
+        with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
+            paths = {line.split()[-1] for line in fh if "openblas" in line.lower()}
+        libs = {p for p in paths
+                if p.startswith("/") and "openblas" in p.rsplit("/", 1)[-1].lower()}
+    except OSError:
+        libs = set()
+    copies = []
+    for path in sorted(libs):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        setter = next((getattr(lib, n) for n in _SET_NAMES if hasattr(lib, n)), None)
+        getter = next((getattr(lib, n) for n in _GET_NAMES if hasattr(lib, n)), None)
+        if setter is not None and getter is not None:
+            getter.restype = ctypes.c_int
+            copies.append((setter, getter))
+    return copies
 
 
 def _set_blas_threads(n: int) -> None:
@@ -41,26 +71,43 @@ def _set_blas_threads(n: int) -> None:
     """
     if _BLAS_THREADS == [n]:
         return
-
-    try:
-        with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
-            paths = {line.split()[-1] for line in fh if "openblas" in line.lower()}
-        libs = {p for p in paths
-                if p.startswith("/") and "openblas" in p.rsplit("/", 1)[-1].lower()}
-    except OSError:
-        libs = set()
-    for path in sorted(libs):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for name in ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
-                     "openblas_set_num_threads64_", "openblas_set_num_threads"):
-            fn = getattr(lib, name, None)
-            if fn is not None:
-                fn(ctypes.c_int(n))
-                break
+    for setter, _ in _openblas_copies():
+        setter(ctypes.c_int(n))
     _BLAS_THREADS[:] = [n]
+
+
+_pinned_lock = threading.Lock()
+_pinned: list[Any] = []     # [depth, saved counts] while some thread is inside single_blas_thread
+
+
+@contextlib.contextmanager
+def single_blas_thread() -> Iterator[None]:
+    """Run a block with every loaded OpenBLAS on one thread, then give back the old counts.
+
+    OpenBLAS splits a product or a factorisation among its threads, and the rounding
+    depends on the split: the touch inversion computed with 2 threads differs from the one
+    computed with 1 (by ~1e-19 N in the forces). What is cached on disk by its inputs
+    (:mod:`.touch.solver_cache`) must be a function of those inputs alone, whatever a
+    process set before, so it is computed on one thread. The counts are process-wide:
+    blocks in several threads nest, and the last one out restores them.
+    """
+    with _pinned_lock:
+        if not _pinned:
+            copies = _openblas_copies()
+            saved = [(setter, int(getter())) for setter, getter in copies]
+            for setter, _ in saved:
+                setter(ctypes.c_int(1))
+            _pinned[:] = [0, saved]
+        _pinned[0] += 1
+    try:
+        yield
+    finally:
+        with _pinned_lock:
+            _pinned[0] -= 1
+            if _pinned[0] == 0:
+                for setter, count in _pinned[1]:
+                    setter(ctypes.c_int(count))
+                _pinned.clear()
 
 
 def shorten_switch_interval(ms: float) -> None:

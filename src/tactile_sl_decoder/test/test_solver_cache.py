@@ -145,3 +145,33 @@ def test_the_default_directory_follows_xdg(monkeypatch, tmp_path):
     monkeypatch.delenv("XDG_CACHE_HOME")
     monkeypatch.setenv("HOME", str(tmp_path))
     assert solver_cache.default_directory() == tmp_path / ".cache" / "tactile_sl" / "traction"
+
+
+def test_an_inversion_is_the_same_bytes_whatever_blas_threads_the_process_set():
+    """A cached entry stands for its key alone: OpenBLAS's thread split must not show in it."""
+    from tactile_sl_decoder import cpu_threads
+
+    shape = (22, 20)             # 3N = 1320: large enough for OpenBLAS to split the work
+    cells = np.arange(shape[0] * shape[1])
+    solvers = []
+    try:
+        for threads in (2, 1):
+            cpu_threads._set_blas_threads(threads)
+            solvers.append(TractionSolver(PAD, PITCH, shape, cells))
+    finally:
+        cpu_threads._set_blas_threads(1)
+        cpu_threads._BLAS_THREADS.clear()
+    _same(*solvers)
+
+
+def test_single_blas_thread_nests_and_gives_the_counts_back():
+    from tactile_sl_decoder import cpu_threads
+
+    copies = cpu_threads._openblas_copies()
+    assert copies, "numpy's and scipy's OpenBLAS are loaded in this process"
+    before = [get() for _, get in copies]
+    with cpu_threads.single_blas_thread():
+        with cpu_threads.single_blas_thread():
+            assert [get() for _, get in copies] == [1] * len(copies)
+        assert [get() for _, get in copies] == [1] * len(copies)
+    assert [get() for _, get in copies] == before

@@ -11,8 +11,10 @@ The key is a SHA-256 over the cell kernel's bytes (the pad, pitch and lattice sh
 the code that computes it), the cells, the weights, ``mirrored`` and the source of the
 modules that build the inversion: an entry written by other code is never read.  What is
 read back is the very arrays that were computed, so the outputs are the same bytes either
-way (test).  Entries are written to a temporary file and renamed (a reader never sees half
-a file, two writers never clash); at most ``max_entries`` are kept, the least recently used
+way (test); they are computed on one BLAS thread, since OpenBLAS's rounding depends on how
+it splits the work, so an entry does not depend on what its writer's process had set (test).
+Entries are written to a temporary file and renamed (a reader never sees half a file, two
+writers never clash); at most ``max_entries`` are kept, the least recently used
 removed.  A file that cannot be read or written gives a warning and the inversion is
 computed as if there were no cache.
 """

@@ -52,6 +52,7 @@ import cv2
 import numpy as np
 
 from tactile_sl_common.elasticity import Elastomer, cell_kernel
+from tactile_sl_decoder.cpu_threads import single_blas_thread
 from tactile_sl_decoder.touch import cholesky
 from tactile_sl_decoder.touch.cholesky import cho_factor_upper, cho_solve_upper
 from tactile_sl_decoder.touch.solver_cache import SolverCache, entry_key, source_digest
@@ -211,9 +212,10 @@ class TractionSolver:
             if stored is not None:
                 self._install(stored)
                 return
-        g = self._forward()
-        self._install(self._invert(g, x, y))
-        self.area_fraction = self._area_fraction(g, x, y, pitch)
+        with single_blas_thread():        # the same bytes in any process (cache key)
+            g = self._forward()
+            self._install(self._invert(g, x, y))
+            self.area_fraction = self._area_fraction(g, x, y, pitch)
         if cache is not None and key is not None:
             cache.store(key, self._stored())
 
