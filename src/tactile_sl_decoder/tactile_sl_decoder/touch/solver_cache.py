@@ -20,6 +20,7 @@ computed as if there were no cache.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -79,18 +80,20 @@ class SolverCache:
     def load(self, key: str, names: tuple[str, ...]) -> dict[str, np.ndarray] | None:
         """The arrays stored under ``key`` (all of ``names``), or None."""
         path = self.path(key)
-        if not path.exists():
-            self.misses += 1
-            return None
         try:
             with open(path, "rb") as file, np.load(file, allow_pickle=False) as stored:
                 arrays = {name: stored[name] for name in names}
-            os.utime(path)                           # recently used
+        except (FileNotFoundError, NotADirectoryError):   # none, or another process's trim
+            # removed it just now (a directory that cannot hold one warns when storing)
+            self.misses += 1
+            return None
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             warnings.warn(f"solver cache: {path} is unreadable ({exc}); computing the "
                           f"inversion instead", stacklevel=2)
             self.misses += 1
             return None
+        with contextlib.suppress(OSError):  # recently used (unless trimmed meanwhile)
+            os.utime(path)
         self.hits += 1
         return arrays
 
