@@ -2,6 +2,8 @@
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 ENV := TACTILE_SL_NETWORK=loopback source env.sh &&
+# pytest processes for `make test` (pytest-xdist; each takes every n-th test domain id)
+TEST_WORKERS ?= 2
 
 .PHONY: help setup build test lint typecheck unit demo bags bench clean
 
@@ -38,7 +40,7 @@ unit: setup
 test: setup
 	@$(ENV) ruff check src tests tools
 	@$(ENV) { log=$$(mktemp); { mypy >"$$log" 2>&1; echo $$? >"$$log.rc"; } & \
-	  python -m pytest src tests; rc=$$?; wait; cat "$$log"; mrc=$$(cat "$$log.rc"); \
+	  python -m pytest -n $(TEST_WORKERS) --dist loadfile src tests; rc=$$?; wait; cat "$$log"; mrc=$$(cat "$$log.rc"); \
 	  rm -f "$$log" "$$log.rc"; [ $$rc -eq 0 ] && [ $$mrc -eq 0 ]; }
 
 demo: setup

@@ -28,13 +28,30 @@ BAGS = REPO / "bags"
 
 
 def _domain_range() -> range:
+    """This process's domain ids: the session's range, dealt out among pytest-xdist workers.
+
+    Worker k of n takes every n-th id from the k-th, so tests running at once in different
+    workers never share a domain.
+    """
     spec = os.environ.get("TACTILE_SL_TEST_DOMAINS", "")
     if spec:
         lo, hi = (int(x) for x in spec.split("-"))
         if not 0 <= lo <= hi <= 101:
             raise ValueError(f"TACTILE_SL_TEST_DOMAINS={spec!r}: need LO-HI within 0-101")
-        return range(lo, hi + 1)
-    return range(60 + os.getpid() % 20, 101)
+        ids = range(lo, hi + 1)
+    else:
+        ids = range(60 + os.getpid() % 20, 101)
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")   # "gw0", "gw1", ... under `-n N`
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if worker.startswith("gw") and workers > 1:
+        if spec == "":   # one range for the whole session (its run id), not one per worker
+            run = os.environ.get("PYTEST_XDIST_TESTRUNUID", "")
+            ids = range(60 + sum(run.encode()) % 20, 101)
+        ids = ids[int(worker[2:]) % workers::workers]
+        if len(ids) < 4:
+            raise ValueError(f"TACTILE_SL_TEST_DOMAINS={spec!r}: too few ids for {workers} "
+                             "pytest-xdist workers (need 4 each)")
+    return ids
 
 
 _domains = itertools.cycle(_domain_range())
