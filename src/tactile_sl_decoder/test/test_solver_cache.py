@@ -153,14 +153,19 @@ def test_an_inversion_is_the_same_bytes_whatever_blas_threads_the_process_set():
 
     shape = (22, 20)             # 3N = 1320: large enough for OpenBLAS to split the work
     cells = np.arange(shape[0] * shape[1])
+    copies = cpu_threads._openblas_copies()
+    before = [get() for _, get in copies]
+    remembered = list(cpu_threads._BLAS_THREADS)
     solvers = []
     try:
         for threads in (2, 1):
-            cpu_threads._set_blas_threads(threads)
+            for setter, _ in copies:
+                setter(threads)
             solvers.append(TractionSolver(PAD, PITCH, shape, cells))
-    finally:
-        cpu_threads._set_blas_threads(1)
-        cpu_threads._BLAS_THREADS.clear()
+    finally:                     # the process's counts as they were, for the other tests
+        for (setter, _), count in zip(copies, before):
+            setter(count)
+        cpu_threads._BLAS_THREADS[:] = remembered
     _same(*solvers)
 
 
