@@ -30,7 +30,10 @@ Then the lighting scenes (bags/light_scenes.yaml: the same known loads under cle
 harsh light and harsh light with MJPEG; rendered first, a few seconds): per scene the pooled
 displacement RMSE and its ratio to the clean scene's, and the worst centroid, normal force,
 force vector and contact area errors, with the limits of issue 25 (harsh rows: RMSE <= 2x clean,
-centroid <= 0.1 mm, force within 2 %).  ``--compare`` evaluates every touch bag and scene
+centroid <= 0.1 mm, force within 2 %).  ``--light-seeds 11 12 13`` renders them once per
+noise seed (the file's own seed is 11) and pools the figures of every draw: the RMSE over all
+of them, the worst frame of any draw (one draw's worst can be luck: docs/touch.md, "the 0.1 N
+frame's figures depend on the noise draw").  ``--compare`` evaluates every touch bag and scene
 twice, without the per-cell weights (``WeightParams.enabled = False``, the touch stage before
 issue 25) and with them, and prints both side by side, with both touch stage times.
 
@@ -74,12 +77,16 @@ LIGHT_SCENES = BAGS / "light_scenes.yaml"
 CLEAN_LIGHT = "light_clean"
 
 
-def render_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str]
+def render_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str],
+                  seeds: list[int] | None = None
                   ) -> list[tuple[str, pathlib.Path, SensorConfig]]:
     """The scenes of ``scenes_file`` as bags in ``out``: (name, bag, its sensor).
 
-    ``only``: these scene names (all when empty).
+    ``only``: these scene names (all when empty).  ``seeds``: each scene once per noise seed
+    (same name; the file's own seed when None or empty).
     """
+    import dataclasses
+
     from tactile_sl_sim.scenes import load_scenes
     from tactile_sl_sim.synth import RendererCache, write_scene_bag
 
@@ -90,9 +97,12 @@ def render_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str]
     unknown = sorted(set(only) - {s.name for s in scenes})
     if unknown:
         raise SystemExit(f"bench_touch: no scene {', '.join(unknown)} in {scenes_file}")
-    for scene in (s for s in scenes if not only or s.name in only):
-        sys.stderr.write(f"rendering {scene.name} ({scene.frames} frames)\n")
-        path = write_scene_bag(scene, cache.get(scene), out / f"{scene.name}.mcap")
+    draws = [(s, None) for s in scenes] if not seeds else [
+        (dataclasses.replace(s, seed=seed), seed) for s in scenes for seed in seeds]
+    for scene, seed in (d for d in draws if not only or d[0].name in only):
+        label = scene.name if seed is None else f"{scene.name}_seed{seed}"
+        sys.stderr.write(f"rendering {label} ({scene.frames} frames)\n")
+        path = write_scene_bag(scene, cache.get(scene), out / f"{label}.mcap")
         bags.append((scene.name, path, SensorConfig(scene.elastomer, source=str(scenes_file))))
     return bags
 
@@ -116,6 +126,9 @@ def main() -> int:
     parser.add_argument("--light-scenes", type=pathlib.Path, default=LIGHT_SCENES,
                         help="known loads under clean and harsh light (default: %(default)s)")
     parser.add_argument("--no-light", action="store_true", help="leave the lighting scenes out")
+    parser.add_argument("--light-seeds", type=int, nargs="+", default=[], metavar="SEED",
+                        help="render the lighting scenes once per noise seed and pool the "
+                        "draws (default: the file's own seed)")
     parser.add_argument("--compare", action="store_true",
                         help="the touch bags and lighting scenes without the per-cell weights "
                         "too (the touch stage before issue 25), side by side")
@@ -126,7 +139,8 @@ def main() -> int:
         slip_bags = [] if args.no_slip else render_scenes(args.slip_scenes,
                                                           pathlib.Path(tmp) / "slip", args.only)
         light_bags = ([] if args.no_light else
-                      render_scenes(args.light_scenes, pathlib.Path(tmp) / "light", []))
+                      render_scenes(args.light_scenes, pathlib.Path(tmp) / "light", [],
+                                    args.light_seeds))
         return _run(args, slip_bags, shape_bags, light_bags)
 
 
@@ -163,6 +177,7 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
                     unweighted_times.extend(f.timings_ms["touch"] for f in old
                                             if "touch" in f.timings_ms)
                     compared.append((name, old, frames))
+            pooled: dict[str, tuple[list, list]] = {}     # a scene's draws (--light-seeds)
             for name, path, sensor in light_bags:
                 frames = evaluate_touch_bag(path, pipe, sensor, progress=progress,
                                             touch_params=weighted)
@@ -172,7 +187,10 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
                     old = evaluate_touch_bag(path, pipe, sensor, touch_params=unweighted)
                     unweighted_times.extend(f.timings_ms["touch"] for f in old
                                             if "touch" in f.timings_ms)
-                compared.append((name, old, frames))
+                before, after = pooled.setdefault(name, ([], []))
+                before.extend(old)
+                after.extend(frames)
+            compared.extend((name, old, new) for name, (old, new) in pooled.items())
             per_shape = []
             for name, path, sensor in shape_bags:
                 frames = evaluate_touch_bag(path, pipe, sensor, progress=progress)
@@ -200,9 +218,11 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
         print(shape_report)
         print()
     if light_report:
-        print(f"lighting and touch bags ({args.light_scenes}; per-cell weights, "
+        draws = (f"; {len(args.light_seeds)} draws, seeds "
+                 f"{' '.join(map(str, args.light_seeds))}, pooled" if args.light_seeds else "")
+        print(f"lighting and touch bags ({args.light_scenes}{draws}; per-cell weights, "
               f"docs/touch.md; before -> with weights):" if args.compare else
-              f"lighting ({args.light_scenes}):")
+              f"lighting ({args.light_scenes}{draws}):")
         print(light_report)
         print()
     if slip_report:
