@@ -258,3 +258,27 @@ def test_noisy_resultant_centroid_defers_to_the_map():
     noisy = contact_state(xy, rows, cols, f, w, shape, 5e-4, np.zeros(shape), False, p,
                           moment_noise=(10.0, 10.0))   # 30 uN m of moment noise
     assert abs(noisy.centroid[1] - (-0.5 * 5e-4)) < 1e-4            # follows the map
+
+
+def test_without_ripples_keeps_the_parts_that_stand_out_of_the_noise():
+    from tactile_sl_decoder.touch.contact import RIPPLE_SIGMAS, without_ripples
+
+    shape = (12, 14)
+    rows, cols = (a.ravel() for a in np.mgrid[0:shape[0], 0:shape[1]])
+    press = np.zeros(len(rows))
+    noise = np.full(len(rows), 1e-3)                     # N per cell
+    contact = (abs(rows - 3) <= 1) & (abs(cols - 4) <= 1)      # 9 cells, 20 mN each
+    press[contact] = 0.02
+    speck_a = (rows == 9) & (cols == 11)                  # single cells at 5 sigma
+    speck_b = (rows == 1) & (cols == 12)
+    press[speck_a | speck_b] = 5e-3
+    core = press > 0.2 * press.max()
+    assert core[speck_a].all() and core[speck_b].all()     # the peak's fraction keeps them
+    kept = without_ripples(core, press, noise, rows, cols, shape)
+    assert np.array_equal(kept, contact)
+    assert 9 * 0.02 > RIPPLE_SIGMAS * 3 * 1e-3              # the contact: 60 sigma
+    # every part a ripple: the one pressing hardest is kept, not none
+    faint = without_ripples(core, press * 0.01, noise, rows, cols, shape)
+    assert np.array_equal(faint, contact)
+    assert not without_ripples(np.zeros(len(rows), bool), press, noise, rows, cols,
+                               shape).any()

@@ -42,8 +42,10 @@ Noise far from the contact cannot pull them: those cells carry no unknown.
 
 S is the support of the constrained pressure (:meth:`~.traction.TractionSolver.support_pressure`:
 cells pressing by ``support_sigmas`` x their noise) or, where that cannot locate the edge of a
-faint contact, the map's cells above the area fraction of its peak; grown by one cell (the
-cells the edge cuts).  A faint contact's pressure is taken uniform over blocks of
+faint contact, the map's cells above the area fraction of its peak, in the 8-connected parts
+that stand out of the noise (:func:`~.contact.without_ripples`: a noisy map's scattered
+peaks are not fitted as pressing); grown by one cell (the cells the edge cuts).  A faint
+contact's pressure is taken uniform over blocks of
 ``COARSE_BLOCK`` x ``COARSE_BLOCK`` cells (those S touches): the data that cannot locate its
 edge cannot resolve it at a cell's scale either, and a quarter of the unknowns removes more
 of the noise (on the harsh 0.1 N frames 125-130 unknowns instead of 415-431, over the

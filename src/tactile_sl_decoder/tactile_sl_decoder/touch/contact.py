@@ -500,6 +500,34 @@ def _ripple(force: np.ndarray, noise: np.ndarray) -> bool:
     return bool(force.sum() <= RIPPLE_SIGMAS * np.sqrt(np.sum(noise ** 2)))
 
 
+def without_ripples(core: np.ndarray, press: np.ndarray, noise: np.ndarray, rows: np.ndarray,
+                    cols: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """``core`` (N,) bool without its 8-connected parts that are ripples of the noise.
+
+    ``press`` (N,) N each cell's pressing force and ``noise`` (N,) N its standard deviation
+    (the map's, propagated from the cells' expected errors).  A part whose force is within
+    ``RIPPLE_SIGMAS`` x sqrt(sum s_i^2) (independent cells) is dropped, as the contact
+    state drops such map regions; if every part is one, the part pressing hardest is kept
+    (the caller asked for a core).  Under harsh light a faint contact's map is a plateau of
+    noise, and the cells above a fraction of its peak are scattered over the pad: fitted as
+    pressing (:mod:`.consistent`) they add their noise to the contact's force and centroid.
+    """
+    if not core.any():
+        return core
+    grid = np.zeros(shape, np.uint8)
+    grid[rows[core], cols[core]] = 1
+    count, labels = cv2.connectedComponents(grid, connectivity=8)
+    part = labels[rows, cols]
+    force = np.bincount(part[core], np.maximum(press[core], 0.0), count)
+    var = np.bincount(part[core], noise[core] ** 2, count)
+    keep = force > RIPPLE_SIGMAS * np.sqrt(var)
+    keep[0] = False
+    if not keep.any():
+        keep[int(np.argmax(np.where(np.arange(count) > 0, force, -np.inf)))] = True
+    out: np.ndarray = core & keep[part]
+    return out
+
+
 def _centroid_variance(core: np.ndarray, xy: np.ndarray, c: np.ndarray,
                        noise: np.ndarray | None) -> float:
     """Noise variance (m^2 per axis) of a region's map centroid; 0 without ``noise``.

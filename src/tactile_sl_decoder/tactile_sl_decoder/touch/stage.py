@@ -42,6 +42,7 @@ from tactile_sl_decoder.touch.contact import (
     contact_hysteresis,
     contact_state,
     depth_grid,
+    without_ripples,
 )
 from tactile_sl_decoder.touch.reference import (
     PadPose,
@@ -520,6 +521,9 @@ class TouchStage:
                 peak = float(press.max()) if len(press) else 0.0
                 core = press > params.area_fraction * peak if peak > 0 else (
                     np.zeros(n, bool))
+                if ref_noise.map is not None:       # not the noise's scattered peaks
+                    core = without_ripples(core, press, ref_noise.map, solver.rows,
+                                           solver.cols, self.shape)
             # (a contact whose edge the support cannot locate: its pressure at half the
             # resolution, which the data cannot resolve finer; without a support inversion,
             # support_weight 0, per cell)
