@@ -48,8 +48,8 @@ peaks are not fitted as pressing); grown by one cell (the cells the edge cuts). 
 contact's pressure is taken uniform over blocks of
 ``COARSE_BLOCK`` x ``COARSE_BLOCK`` cells (those S touches): the data that cannot locate its
 edge cannot resolve it at a cell's scale either, and a quarter of the unknowns removes more
-of the noise (on the harsh 0.1 N frames 125-130 unknowns instead of 415-431, over the
-``MAX_SHARE`` a per-cell fit may have).
+of the noise (on the harsh 0.1 N frames 32-78 unknowns, 64-129 before the ripples were
+dropped, instead of 415-431 cells, over the ``MAX_SHARE`` a per-cell fit may have).
 
 Only the normal component is fitted: for a nearly incompressible pad the normal pressure
 moves the surface along its normal and the shear tractions within it
