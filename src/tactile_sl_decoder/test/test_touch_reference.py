@@ -70,6 +70,9 @@ def test_builder_averages_cells_seen_in_half_the_frames():
     cells, mean = b.result()
     assert list(cells) == [0, 1]                 # cell 2 seen once of 3, cell 3 never
     assert np.allclose(mean[0], 3.0) and np.allclose(mean[1], 2.0)
+    # one frame's noise: the sample variance over the frames (1, 3, 5: 4; 1, 3: 2)
+    assert np.allclose(b.scatter(cells), [[4.0] * 3, [2.0] * 3])
+    assert np.all(np.isnan(b.scatter(np.array([2]))))       # seen once: unknown
     with pytest.raises(ValueError):
         ReferenceBuilder(0, (2, 2))
 

@@ -75,6 +75,30 @@ def _weights(scale, frames=1, **kw):
     return CellWeights(ROWS, COLS, SHAPE, rest, NOMINAL, frames, WeightParams(**kw))
 
 
+def test_several_reference_frames_give_each_frame_its_own_noise():
+    """An averaged reference is smoother than one frame: its roughness is no frame's noise."""
+    from tactile_sl_decoder.touch.reference import ReferenceBuilder
+
+    rng = np.random.default_rng(11)
+    scale, dark = _noise_scale(dark=20e-6, clean=1e-6)
+    frames = 5
+    builder = ReferenceBuilder(frames, SHAPE)
+    for _ in range(frames):
+        builder.add(ROWS, COLS, NOMINAL + rng.normal(0.0, 1.0, NOMINAL.shape) * scale)
+    cells, mean = builder.result()
+    weights = CellWeights(ROWS, COLS, SHAPE, mean, NOMINAL, frames, WeightParams(),
+                          builder.scatter(cells))
+    far = _far_from(dark, 1)
+    inner = dark & _far_from(~dark, 1)                        # the patches' inner cells
+    # a displacement's error: sqrt(1 + 1 / frames) x the frame's noise
+    expected = 20e-6 * np.sqrt(1 + 1 / frames)
+    assert np.median(weights.error[inner]) == pytest.approx(expected, rel=0.2)
+    assert np.median(weights.error[far]) == pytest.approx(1.5e-6 * np.sqrt(1.2), rel=0.05)
+    # from the averaged reference's roughness alone it would be sqrt(frames) x too small
+    smooth = CellWeights(ROWS, COLS, SHAPE, mean, NOMINAL, frames, WeightParams())
+    assert np.median(smooth.error[inner]) < 0.6 * expected
+
+
 def test_a_clean_pad_is_taken_as_measured():
     weights = _weights(np.full((len(ROWS), 3), 1e-6))
     assert len(weights.noisy) == 0
@@ -186,6 +210,18 @@ def test_the_stage_weighs_noisy_cells_out_of_force_and_centroid():
     assert errors[True][1] < 0.7 * errors[False][1]
     assert errors[True][2] < 0.4 * errors[False][2]
     assert errors[True][3] < 0.15 * want.contact.area
+
+
+def test_the_stage_takes_the_noise_of_several_reference_frames_from_their_scatter():
+    scale, dark = _noise_scale(dark=20e-6, clean=1e-6)
+    rng = np.random.default_rng(4)
+    stage = TouchStage(SensorConfig(ELASTOMER), SHAPE, PITCH,
+                       params=TouchParams(reference_frames=4, solver_cache=False))
+    for _ in range(4):
+        stage.update(_points(rng.normal(0.0, 1.0, NOMINAL.shape) * scale))
+    weights = stage.reference.weights
+    inner = dark & _far_from(~dark, 1)
+    assert np.median(weights.error[inner]) == pytest.approx(20e-6 * np.sqrt(1.25), rel=0.25)
 
 
 def test_a_clean_pad_gives_the_same_bytes_with_or_without_weights():

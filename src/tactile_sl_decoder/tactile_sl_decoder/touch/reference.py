@@ -123,13 +123,16 @@ class ReferenceBuilder:
         self.shape = shape
         n = shape[0] * shape[1]
         self._sum = np.zeros((n, 3))
+        self._sum_sq = np.zeros((n, 3))
         self._count = np.zeros(n, np.int64)
         self.collected = 0
 
     def add(self, rows: np.ndarray, cols: np.ndarray, xyz: np.ndarray) -> bool:
         """Add one decoded frame; True once enough frames are in."""
         idx = np.asarray(rows, np.int64) * self.shape[1] + np.asarray(cols, np.int64)
-        np.add.at(self._sum, idx, np.asarray(xyz, np.float64))
+        xyz = np.asarray(xyz, np.float64)
+        np.add.at(self._sum, idx, xyz)
+        np.add.at(self._sum_sq, idx, xyz * xyz)
         np.add.at(self._count, idx, 1)
         self.collected += 1
         return self.collected >= self.frames
@@ -140,3 +143,19 @@ class ReferenceBuilder:
         keep &= self._count > 0
         idx = np.flatnonzero(keep)
         return idx, self._sum[idx] / self._count[idx, None]
+
+    def scatter(self, idx: np.ndarray) -> np.ndarray:
+        """Variance (len(idx), 3) m^2 of one frame's position of each cell about its mean.
+
+        The sample variance over the frames that saw the cell, per axis of the input frame;
+        NaN for a cell seen fewer than twice.  What a single frame's noise is, whatever the
+        print's and the decoder's fixed errors (which the mean keeps and a displacement
+        cancels).
+        """
+        count = self._count[idx].astype(np.float64)[:, None]
+        mean = self._sum[idx] / np.maximum(count, 1.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            var = (self._sum_sq[idx] - count * mean * mean) / (count - 1.0)
+        var[np.broadcast_to(count < 2, var.shape)] = np.nan
+        out: np.ndarray = np.maximum(var, 0.0)
+        return out

@@ -354,20 +354,25 @@ class TouchStage:
         return len(self._pending)
 
     def _prepare_reference(self, cells: np.ndarray, mean: np.ndarray, frames: int,
-                           solver: TractionSolver | None = None) -> tuple[Any, ...]:
+                           solver: TractionSolver | None = None,
+                           scatter: np.ndarray | None = None) -> tuple[Any, ...]:
         """The costly part of a new reference, touching no state of the stage.
 
-        ``solver``: an inversion already made for exactly these cells (reused as it is).
+        ``solver``: an inversion already made for exactly these cells (reused as it is);
+        ``scatter``: the cells' variance over the reference frames (left optical frame).
         """
         rows, cols = cells // self.shape[1], cells % self.shape[1]
         nominal = nominal_positions(rows, cols, self.shape, self.pitch, self.mirrored)
         pose = fit_pad_pose(nominal, mean)
         rest = pose.to_pad(mean)
+        # per-axis variances into the pad frame: the diagonal of R^T diag(v) R
+        frame_variance = None if scatter is None else scatter @ pose.rotation ** 2
         if solver is None:
             solver = TractionSolver(self.sensor.elastomer, self.pitch, self.shape, cells,
                                     self.params.traction, self.mirrored, self.solver_cache)
         weights = (CellWeights(solver.rows, solver.cols, self.shape, rest, nominal, frames,
-                               self.params.weights) if self.params.weights.enabled else None)
+                               self.params.weights, frame_variance)
+                   if self.params.weights.enabled else None)
         noise = reference_noise(weights, solver, self.params.contact.displacement_noise)
         consistent = for_reference(solver, weights, self.shape, nominal,
                                    self.params.contact.displacement_noise)
@@ -436,12 +441,14 @@ class TouchStage:
             if self._builder.add(rows, cols, xyz):
                 cells, mean = self._builder.result()
                 frames = self._builder.collected
+                scatter = self._builder.scatter(cells) if frames > 1 else None
                 solver = self._reusable_solver(cells)
                 if self.background and solver is None:
                     self._preparing = _Preparation(
-                        lambda: self._prepare_reference(cells, mean, frames))
+                        lambda: self._prepare_reference(cells, mean, frames, None, scatter))
                 else:
-                    self._set_reference(self._prepare_reference(cells, mean, frames, solver))
+                    self._set_reference(self._prepare_reference(cells, mean, frames, solver,
+                                                                scatter))
             return None
         return self._outputs(points)
 
