@@ -18,11 +18,14 @@ when it is closed without an error, so a failed or interrupted run never leaves 
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import pathlib
+import signal
 import struct
 import sys
 import tempfile
+import threading
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator
 
@@ -150,7 +153,12 @@ class BagWriter:
 
     The bag goes to a temporary file next to ``path``; :meth:`close` renames it onto
     ``path``, :meth:`abort` (and leaving the ``with`` block by an exception) removes it.
+    No temporary file outlives a Ctrl-C or SIGTERM, wherever it comes: while the writer is
+    being made the signals wait (main thread), and a writer dropped unclosed (an exception
+    between its making and the ``with`` block) removes its file too.
     """
+
+    _closed = True      # until the writer is whole: nothing for __del__ to remove
 
     def __init__(self, path: str | os.PathLike, compression: str = "zstd") -> None:
         self.path = pathlib.Path(path)
@@ -158,21 +166,34 @@ class BagWriter:
                  "none": CompressionType.NONE}
         if compression not in kinds:
             raise BagError(f"{self.path}: unknown compression {compression!r}")
-        try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp",
-                                       dir=self.path.parent)
-        except OSError as exc:
-            raise BagError(f"cannot write {self.path}: {exc.strerror or exc}") from None
-        self._tmp = pathlib.Path(tmp)
-        self._file = os.fdopen(fd, "wb")
-        self._writer = McapWriter(self._file, compression=kinds[compression], enable_crcs=True,
-                                  enable_data_crcs=True)
-        self._writer.start(profile="ros2", library="tactile-sl")
         self._schemas: dict[str, tuple[int, EncoderFunction]] = {}
         self._channels: dict[str, int] = {}
         self._sequence: dict[str, int] = {}
-        self._closed = False
+        fd = tmp = None
+        try:
+            with _signals_held():
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp",
+                                           dir=self.path.parent)
+                self._tmp = pathlib.Path(tmp)
+                self._file = os.fdopen(fd, "wb")
+                self._writer = McapWriter(self._file, compression=kinds[compression],
+                                          enable_crcs=True, enable_data_crcs=True)
+                self._writer.start(profile="ros2", library="tactile-sl")
+                self._closed = False
+        except BaseException as exc:      # a signal held back above is raised here, too
+            self._closed = True
+            if tmp is not None:
+                with contextlib.suppress(OSError, ValueError):
+                    if getattr(self, "_file", None) is not None:
+                        self._file.close()
+                    elif fd is not None:
+                        os.close(fd)
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
+            if isinstance(exc, OSError):
+                raise BagError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+            raise
 
     def _schema(self, schema_name: str) -> tuple[int, EncoderFunction]:
         if schema_name not in self._schemas:
@@ -249,6 +270,42 @@ class BagWriter:
             self.close()
         else:
             self.abort()
+
+    def __del__(self) -> None:
+        """A writer dropped without :meth:`close` leaves no temporary file behind."""
+        try:
+            self.abort()
+        except Exception:     # at interpreter exit the modules may be gone; nothing to do
+            pass
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM wait until the block is done (main thread).
+
+    Their Python handlers (KeyboardInterrupt, the command line's Terminated) raise wherever
+    the interpreter stands, even inside ``tempfile.mkstemp`` after the file exists.  For
+    the block their handlers only note the signal; after it the old handlers are back and
+    a noted signal is raised again, where the caller can still clean up.  (Not a signal
+    mask: another thread would take the signal and the main thread run its handler at
+    once.)
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    noted: list[int] = []
+
+    def note(signum: int, _frame: Any) -> None:
+        noted.append(signum)
+
+    previous = {s: signal.signal(s, note) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for held, handler in previous.items():
+            signal.signal(held, handler)
+        for signum in dict.fromkeys(noted):
+            signal.raise_signal(signum)
 
 
 # --------------------------------------------------------------------------- reading

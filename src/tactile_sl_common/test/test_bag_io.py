@@ -101,3 +101,51 @@ def test_image_conversion_errors_are_specific():
     Msg.height = 0
     with pytest.raises(ImageFormatError, match="empty image"):
         image_to_array(Msg())
+
+
+def test_no_temporary_file_outlives_an_interrupt_while_the_writer_is_made(tmp_path,
+                                                                           monkeypatch):
+    """SIGTERM right after the temporary file appeared once left it behind (a loaded CI)."""
+    import gc
+    import os
+    import signal
+
+    from tactile_sl_common import bag_io
+
+    class Stopped(Exception):
+        pass
+
+    def stop(*_):
+        raise Stopped
+
+    started = bag_io.McapWriter.start
+    gc.collect()     # no other test's writer left for a destructor to run the handler in
+
+    def signalled_start(self, *args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)       # held back until the writer is whole
+        return started(self, *args, **kwargs)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        monkeypatch.setattr(bag_io.McapWriter, "start", signalled_start)
+        with pytest.raises(Stopped):
+            bag_io.BagWriter(tmp_path / "out.mcap")
+        assert list(tmp_path.iterdir()) == []
+        monkeypatch.setattr(bag_io.McapWriter, "start", started)
+
+        def interrupted_start(self, *args, **kwargs):
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(bag_io.McapWriter, "start", interrupted_start)
+        with pytest.raises(KeyboardInterrupt):
+            bag_io.BagWriter(tmp_path / "out.mcap")
+        assert list(tmp_path.iterdir()) == []
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    monkeypatch.setattr(bag_io.McapWriter, "start", started)
+    # made, then dropped before its `with` block: its file goes with it
+    writer = bag_io.BagWriter(tmp_path / "out.mcap")
+    assert len(list(tmp_path.iterdir())) == 1
+    del writer
+    gc.collect()
+    assert list(tmp_path.iterdir()) == []
