@@ -39,14 +39,12 @@ def _domain_range() -> range:
         if not 0 <= lo <= hi <= 101:
             raise ValueError(f"TACTILE_SL_TEST_DOMAINS={spec!r}: need LO-HI within 0-101")
         ids = range(lo, hi + 1)
-    else:
-        ids = range(60 + os.getpid() % 20, 101)
+    else:   # one range for the whole session (its xdist run id), not one per worker
+        run = os.environ.get("PYTEST_XDIST_TESTRUNUID", "")
+        ids = range(60 + (sum(run.encode()) if run else os.getpid()) % 20, 101)
     worker = os.environ.get("PYTEST_XDIST_WORKER", "")   # "gw0", "gw1", ... under `-n N`
     workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
     if worker.startswith("gw") and workers > 1:
-        if spec == "":   # one range for the whole session (its run id), not one per worker
-            run = os.environ.get("PYTEST_XDIST_TESTRUNUID", "")
-            ids = range(60 + sum(run.encode()) % 20, 101)
         ids = ids[int(worker[2:]) % workers::workers]
         if len(ids) < 4:
             raise ValueError(f"TACTILE_SL_TEST_DOMAINS={spec!r}: too few ids for {workers} "

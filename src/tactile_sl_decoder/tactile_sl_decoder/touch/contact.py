@@ -497,7 +497,12 @@ RIPPLE_SIGMAS = 8.0
 
 def _ripple(force: np.ndarray, noise: np.ndarray) -> bool:
     """The region's force (per cell, N) is within ``RIPPLE_SIGMAS`` x its ``noise``."""
-    return bool(force.sum() <= RIPPLE_SIGMAS * np.sqrt(np.sum(noise ** 2)))
+    return bool(_within_noise(force.sum(), np.sum(noise ** 2)))
+
+
+def _within_noise(force: np.ndarray, variance: np.ndarray) -> np.ndarray:
+    """Total force(s) (N) within ``RIPPLE_SIGMAS`` x sqrt(``variance``): ripples."""
+    return force <= RIPPLE_SIGMAS * np.sqrt(variance)
 
 
 def without_ripples(core: np.ndarray, press: np.ndarray, noise: np.ndarray, rows: np.ndarray,
@@ -520,7 +525,7 @@ def without_ripples(core: np.ndarray, press: np.ndarray, noise: np.ndarray, rows
     part = labels[rows, cols]
     force = np.bincount(part[core], np.maximum(press[core], 0.0), count)
     var = np.bincount(part[core], noise[core] ** 2, count)
-    keep = force > RIPPLE_SIGMAS * np.sqrt(var)
+    keep = ~_within_noise(force, var)
     keep[0] = False
     if not keep.any():
         keep[int(np.argmax(np.where(np.arange(count) > 0, force, -np.inf)))] = True
