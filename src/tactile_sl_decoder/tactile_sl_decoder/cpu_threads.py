@@ -31,7 +31,6 @@ def set_cpu_threads(n: int) -> None:
     _set_blas_threads(n)
 
 
-_BLAS_THREADS: list[int] = []      # the thread count last given to the loaded OpenBLAS copies
 _SET_NAMES = ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
               "openblas_set_num_threads64_", "openblas_set_num_threads")
 _GET_NAMES = ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads",
@@ -67,13 +66,18 @@ def _set_blas_threads(n: int) -> None:
     numpy's matrix products (the classifier) otherwise start one BLAS thread per core: with
     the two images classified in two workers on two cores, those threads spin against each
     other (measured: extraction + classification 12 ms instead of 9 ms per stereo pair).
-    Done once per count; libraries that are not loaded are left alone.
+    Applied on every call (once per pipeline: a count remembered instead went stale when
+    something else had set them since, and a pipeline then ran with other counts, other
+    rounding, than it asked for); libraries that are not loaded are left alone.  Inside a
+    :func:`single_blas_thread` block the copies stay on one thread and take ``n`` when
+    it ends.
     """
-    if _BLAS_THREADS == [n]:
-        return
-    for setter, _ in _openblas_copies():
-        setter(ctypes.c_int(n))
-    _BLAS_THREADS[:] = [n]
+    with _pinned_lock:
+        if _pinned:
+            _pinned[1] = [(setter, n) for setter, _ in _pinned[1]]
+            return
+        for setter, _ in _openblas_copies():
+            setter(ctypes.c_int(n))
 
 
 _pinned_lock = threading.Lock()
@@ -89,7 +93,8 @@ def single_blas_thread() -> Iterator[None]:
     computed with 1 (by ~1e-19 N in the forces). What is cached on disk by its inputs
     (:mod:`.touch.solver_cache`) must be a function of those inputs alone, whatever a
     process set before, so it is computed on one thread. The counts are process-wide:
-    blocks in several threads nest, and the last one out restores them.
+    blocks in several threads nest, and the last one out restores them (or the count
+    :func:`set_cpu_threads` asked for meanwhile).
     """
     with _pinned_lock:
         if not _pinned:

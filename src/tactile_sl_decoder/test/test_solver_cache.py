@@ -155,7 +155,6 @@ def test_an_inversion_is_the_same_bytes_whatever_blas_threads_the_process_set():
     cells = np.arange(shape[0] * shape[1])
     copies = cpu_threads._openblas_copies()
     before = [get() for _, get in copies]
-    remembered = list(cpu_threads._BLAS_THREADS)
     solvers = []
     try:
         for threads in (2, 1):
@@ -165,7 +164,6 @@ def test_an_inversion_is_the_same_bytes_whatever_blas_threads_the_process_set():
     finally:                     # the process's counts as they were, for the other tests
         for (setter, _), count in zip(copies, before):
             setter(count)
-        cpu_threads._BLAS_THREADS[:] = remembered
     _same(*solvers)
 
 
@@ -180,3 +178,26 @@ def test_single_blas_thread_nests_and_gives_the_counts_back():
             assert [get() for _, get in copies] == [1] * len(copies)
         assert [get() for _, get in copies] == [1] * len(copies)
     assert [get() for _, get in copies] == before
+
+
+def test_a_count_asked_for_inside_a_pinned_block_holds_after_it():
+    """A pipeline made while another thread prepares an inversion keeps its own count."""
+    from tactile_sl_decoder import cpu_threads
+
+    copies = cpu_threads._openblas_copies()
+    before = [get() for _, get in copies]
+    try:
+        cpu_threads.set_cpu_threads(2)
+        with cpu_threads.single_blas_thread():
+            cpu_threads.set_cpu_threads(1)
+            assert [get() for _, get in copies] == [1] * len(copies)
+            cpu_threads.set_cpu_threads(2)
+            assert [get() for _, get in copies] == [1] * len(copies)   # still pinned
+        assert [get() for _, get in copies] == [2] * len(copies)      # what was asked for
+        for setter, _ in copies:          # set behind its back: the next call applies again
+            setter(1)
+        cpu_threads.set_cpu_threads(2)
+        assert [get() for _, get in copies] == [2] * len(copies)
+    finally:
+        for (setter, _), count in zip(copies, before):
+            setter(count)
