@@ -190,15 +190,16 @@ class Sweep:
     """Renderers per glyph spacing, one pipeline, the ground-truth comparison."""
 
     def __init__(self, frames: int, seed: int, weights: str | None = None,
-                 bound: bool = False) -> None:
+                 bound: bool = False, artwork_fit: bool = False) -> None:
         from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
         from tactile_sl_sim.artwork import load_artwork
 
         self.frames, self.seed, self.bound = frames, seed, bound
         self.artwork = load_artwork()
         self.pattern = PatternSpec.load()
-        self.pipeline = StereoPipeline(self.pattern, params=PipelineParams(
-            threads=1, classifier_weights=weights))
+        params = PipelineParams(threads=1, classifier_weights=weights)
+        params.artwork_fit.enabled = artwork_fit
+        self.pipeline = StereoPipeline(self.pattern, params=params)
         from tactile_sl_decoder.tooling.training import DEFAULT_PRIMITIVES, artwork_values
 
         # every cell's symbol read from the rendered artwork (the pattern's, by construction)
@@ -411,6 +412,9 @@ def main(argv: list[str] | None = None) -> int:
                          "of its glyphs (renders every frame 11 more times: its signal before "
                          "noise, without glyphs and with every third row and column of them)")
     ap.add_argument("--json", default=None, help="also write the figures as JSON")
+    ap.add_argument("--artwork-fit", action="store_true",
+                    help="the decoder's artwork fit on (artwork_fit.enabled; implies --no-write: "
+                         "the table in docs/robustness.md is the default decoder's)")
     ap.add_argument("--pictures", type=pathlib.Path, default=REPO / "out" / "sweep",
                     help="folder of the rows' pictures (default out/sweep)")
     ap.add_argument("--picture-rows", nargs="*", default=["combined"],
@@ -422,7 +426,9 @@ def main(argv: list[str] | None = None) -> int:
         if unknown:
             ap.error(f"unknown nuisance(s) {', '.join(unknown)}; known: {', '.join(rows)}")
         rows = [r for r in rows if r in args.only]
-    sweep = Sweep(args.frames, args.seed, args.weights, args.bound)
+    if args.artwork_fit:
+        args.no_write = True
+    sweep = Sweep(args.frames, args.seed, args.weights, args.bound, args.artwork_fit)
     results: list[tuple[str, str, dict[str, float]]] = []
     t0 = time.time()
     for name in rows:

@@ -129,6 +129,9 @@ def main() -> int:
     parser.add_argument("--light-seeds", type=int, nargs="+", default=[], metavar="SEED",
                         help="render the lighting scenes once per noise seed and pool the "
                         "draws (default: the file's own seed)")
+    parser.add_argument("--artwork-fit", action="store_true",
+                        help="the decoder's artwork fit on (artwork_fit.enabled: glyph centres "
+                        "fitted with the printed artwork)")
     parser.add_argument("--compare", action="store_true",
                         help="the touch bags and lighting scenes without the per-cell weights "
                         "too (the touch stage before issue 25), side by side")
@@ -149,6 +152,7 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
          light_bags: list[tuple[str, pathlib.Path, SensorConfig]]) -> int:
     load0 = os.getloadavg()
     pipe = StereoPipeline(PatternSpec.load(None))
+    pipe.params.artwork_fit.enabled = bool(args.artwork_fit)
     times: dict[str, list[float]] = {"touch": [], "slip": [], "pipeline": []}
     unweighted_times: list[float] = []
     weighted = TouchParams()

@@ -39,6 +39,8 @@ from tactile_sl_decoder.decode.track import StreamMemory
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
+from tactile_sl_decoder.pattern.shapes import default_primitives
+from tactile_sl_decoder.stereo.artwork_fit import ArtworkFitParams, ArtworkModel
 from tactile_sl_decoder.stereo.outliers import OutlierParams
 from tactile_sl_decoder.stereo.pair import PairSettings, pair_points
 from tactile_sl_decoder.stereo.rescue import RescueParams
@@ -57,6 +59,7 @@ class PipelineParams:
     carry: CarryParams = field(default_factory=CarryParams)   # labels from the last frame
     transfer: TransferParams = field(default_factory=TransferParams)  # cells across the pair
     rescue: RescueParams = field(default_factory=RescueParams)  # undetected glyphs, images path
+    artwork_fit: ArtworkFitParams = field(default_factory=ArtworkFitParams)  # images path
     extraction: Any = None          # tactile_sl_decoder.extract.extraction.ExtractionParams
     threads: int = 2                # >1: extract + classify left and right concurrently
     processes: bool = False         # each camera's extraction + classification in a process
@@ -94,6 +97,13 @@ class PatternSpec:
     min_hamming: int = 3
     symbols: int = 3
     pitch_m: float = 0.0
+    primitives: tuple[str, ...] = ()
+    """The glyph of each symbol (the pattern file's names); empty: the defaults for
+    ``symbols`` (:func:`tactile_sl_decoder.pattern.shapes.default_primitives`)."""
+
+    def glyph_names(self) -> tuple[str, ...]:
+        """:attr:`primitives`, or the default glyphs of ``symbols``."""
+        return self.primitives or tuple(default_primitives(self.symbols))
 
     @classmethod
     def from_pattern(cls, pattern: Any) -> "PatternSpec":
@@ -102,7 +112,8 @@ class PatternSpec:
             return pattern
         c = pattern.constraints
         return cls(np.asarray(pattern.array, np.uint8), tuple(c.window), int(c.min_hamming),
-                   int(c.symbols), float(getattr(pattern, "pitch_m", 0.0)))
+                   int(c.symbols), float(getattr(pattern, "pitch_m", 0.0)),
+                   tuple(getattr(pattern, "primitives", None) or ()))
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> "PatternSpec":
@@ -130,6 +141,8 @@ class StereoPipeline:
         self.params.carry.validate()
         self.params.transfer.validate()
         self.params.rescue.validate()
+        self.params.artwork_fit.validate()
+        self._artwork: ArtworkModel | None = None
         self.memory = StreamMemory(self.params.carry)   # shares params.carry: live changes
         self._pool = None
         self._procs: CameraProcesses | None = None
@@ -348,7 +361,7 @@ class StereoPipeline:
         p = self.params
         pair = pair_points(left, right, rig, self.pattern.array,
                            PairSettings(p.transfer, p.rescue, p.stereo, p.outliers,
-                                        p.extraction),
+                                        p.extraction, p.artwork_fit, self.artwork()),
                            self._predict, images)
         t2 = time.perf_counter()
         result = StereoResult(pair.points, left, right,
@@ -356,6 +369,17 @@ class StereoPipeline:
                               pair.rejected, rig.frame_id, assisted=pair.assisted)
         result.tracked = tracked
         return result
+
+    def artwork(self) -> ArtworkModel | None:
+        """The pattern's artwork for the artwork fit, drawn when first wanted.
+
+        None while ``params.artwork_fit`` is off.
+        """
+        if not self.params.artwork_fit.enabled:
+            return None
+        if self._artwork is None:
+            self._artwork = ArtworkModel(self.pattern.array, self.pattern.glyph_names())
+        return self._artwork
 
     def _in_processes(self, left_gray: np.ndarray, right_gray: np.ndarray, rig: StereoRig
                       ) -> tuple[tuple[Glyphs, Glyphs], int, tuple[Any, Any], list[float]]:

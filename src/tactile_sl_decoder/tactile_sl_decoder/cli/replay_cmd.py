@@ -59,6 +59,10 @@ def register(subparsers: Any, summary: str | None = None) -> None:
                    help="sensor file: elastomer and pad frame (default: the shipped one)")
     p.add_argument("--reference-frames", type=number(int, 1, 1000), default=1, metavar="N",
                    help="the first N decoded frames are the untouched reference (default 1)")
+    p.add_argument("--artwork-fit", action="store_true",
+                   help="fit every decoded glyph's centre with the printed artwork before "
+                        "triangulating (the decoder's artwork_fit.enabled; slower, more "
+                        "precise: docs/robustness.md)")
     p.add_argument("--no-touch", action="store_true",
                    help="write only /tactile/points (no field, wrench, contact, depth, slip)")
     p.add_argument("--namespace", default="/tactile", help="topic namespace of the bag")
@@ -79,6 +83,7 @@ def run(args: argparse.Namespace) -> int:
         pattern = load_pattern_spec(args.pattern, args.allow_invalid_pattern)
         params = PipelineParams(classifier_weights=args.classifier)
         params.decode.mirrored = bool(args.mirrored)
+        params.artwork_fit.enabled = bool(args.artwork_fit)
         pipeline = StereoPipeline(pattern, None, params)
         check_classifier(pipeline.load_classifier(), pattern.symbols,
                          args.classifier or "(shipped)")

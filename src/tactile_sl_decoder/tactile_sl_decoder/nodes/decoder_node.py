@@ -212,7 +212,8 @@ class DecoderNode(Node):
         p = self.pipeline_params
         settings = {"node": self.settings, "decode": p.decode, "stereo": p.stereo,
                     "outliers": p.outliers, "carry": p.carry, "transfer": p.transfer,
-                    "rescue": p.rescue, "extraction": p.extraction, "diagnostics": self.limits,
+                    "rescue": p.rescue, "artwork_fit": p.artwork_fit,
+                    "extraction": p.extraction, "diagnostics": self.limits,
                     "touch": self.touch_params, "contact": self.touch_params.contact,
                     "touch_weights": self.touch_params.weights,
                     "elastomer": self.overrides}

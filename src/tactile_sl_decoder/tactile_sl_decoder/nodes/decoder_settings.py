@@ -2,10 +2,11 @@
 
 The node's own settings (inputs, files, outputs, threads, warnings) are
 :class:`DecoderNodeSettings`, the sensor file's overrides :class:`ElastomerOverrides`; the
-library's settings (decoding, stereo, outliers, carry, transfer, rescue, extraction, touch,
-contact, diagnostics) bring their tables from their own modules.  :data:`DECODER_TABLES`
-lists them all with the name prefix and the words that open each description: the node
-declares from it, and a test compares every declared parameter with its table.  No rclpy.
+library's settings (decoding, stereo, outliers, carry, transfer, rescue, artwork fit,
+extraction, touch, contact, diagnostics) bring their tables from their own modules.
+:data:`DECODER_TABLES` lists them all with the name prefix and the words that open each
+description: the node declares from it, and a test compares every declared parameter with
+its table.  No rclpy.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from tactile_sl_decoder.classify.carry import CARRY_SETTINGS
 from tactile_sl_decoder.decode.codewords import DECODE_SETTINGS
 from tactile_sl_decoder.extract.extraction import EXTRACTION_SETTINGS
 from tactile_sl_decoder.nodes.diagnostics import DIAGNOSTIC_SETTINGS
+from tactile_sl_decoder.stereo.artwork_fit import ARTWORK_FIT_SETTINGS
 from tactile_sl_decoder.stereo.outliers import OUTLIER_SETTINGS
 from tactile_sl_decoder.stereo.rescue import RESCUE_SETTINGS
 from tactile_sl_decoder.stereo.stereo import STEREO_SETTINGS
@@ -161,6 +163,9 @@ DECODER_TABLES: tuple[Declared, ...] = (
     Declared("rescue", RESCUE_SETTINGS, "rescue.",
              "Glyphs one camera did not detect (input=images; docs/robustness.md, 'Glyphs "
              "one camera did not detect'): "),
+    Declared("artwork_fit", ARTWORK_FIT_SETTINGS, "artwork_fit.",
+             "Glyph centres fitted with the printed artwork before triangulating (input=images; "
+             "docs/robustness.md, 'Centres fitted with the artwork'): "),
     Declared("extraction", EXTRACTION_SETTINGS, "extraction.",
              "Glyph extraction (input=images): "),
     Declared("diagnostics", DIAGNOSTIC_SETTINGS, "diagnostics.", "Diagnostics threshold: "),

@@ -4,13 +4,15 @@
    other image decoded where the pair's geometry and the neighbouring cells put it.
 2. **Rescue** (:mod:`.rescue`, images path only): a cell one image decoded where the other
    holds no glyph is measured in that image where its neighbours put it (and classified).
-3. **Match and triangulate** (:mod:`.stereo`): cells decoded in both images, through the
+3. **Artwork fit** (:mod:`.artwork_fit`, images path only, off by default): every glyph
+   with a cell is re-centred by fitting the printed artwork around it to the image.
+4. **Match and triangulate** (:mod:`.stereo`): cells decoded in both images, through the
    epipolar and depth gates.
-4. **Outliers** (:mod:`.outliers`): points off the smooth surface their lattice neighbours
+5. **Outliers** (:mod:`.outliers`): points off the smooth surface their lattice neighbours
    define are dropped.
 
 :class:`~tactile_sl_decoder.pipeline.StereoPipeline` calls :func:`pair_points` after
-decoding both images; docs/robustness.md describes steps 1, 2 and 4.
+decoding both images; docs/robustness.md describes steps 1, 2, 3 and 5.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ import numpy as np
 from tactile_sl_common.clouds import pack_points
 from tactile_sl_decoder.extract.extraction import ExtractionParams
 from tactile_sl_decoder.glyphs import Glyphs
+from tactile_sl_decoder.stereo.artwork_fit import ArtworkFitParams, ArtworkModel, fit_centres
 from tactile_sl_decoder.stereo.outliers import OutlierParams, surface_outliers
 from tactile_sl_decoder.stereo.rescue import Rescued, RescueParams, rescue_pair
 from tactile_sl_decoder.stereo.stereo import StereoParams, StereoRig, match_and_triangulate
@@ -37,6 +40,8 @@ class PairSettings:
     stereo: StereoParams
     outliers: OutlierParams
     extraction: ExtractionParams | None = None   # for rescue; None = the defaults
+    artwork_fit: ArtworkFitParams | None = None  # None = off
+    artwork: ArtworkModel | None = None          # the pattern's artwork, for the fit
 
 
 @dataclass
@@ -88,6 +93,12 @@ def pair_points(left: Glyphs, right: Glyphs, rig: StereoRig, symbols: np.ndarray
             uv_l, cl, rect_l = _with_rescued(uv_l, cl, rect_l, found[0], rig.left)
             uv_r, cr, rect_r = _with_rescued(uv_r, cr, rect_r, found[1], rig.right)
             assisted = (assisted[0] + len(found[0].cell), assisted[1] + len(found[1].cell))
+    fit = settings.artwork_fit
+    if images is not None and fit is not None and fit.enabled and settings.artwork is not None:
+        uv_l, rect_l = _fitted(images[0], uv_l, cl, rect_l, ncols, settings.artwork, fit,
+                               rig.left)
+        uv_r, rect_r = _fitted(images[1], uv_r, cr, rect_r, ncols, settings.artwork, fit,
+                               rig.right)
     m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, settings.stereo, rect_l, rect_r)
     # Points off the smooth surface their lattice neighbours define are dropped: a glyph
     # centre pulled aside in one image (shadow edge, dust, texture) or a wrong cell.
@@ -97,6 +108,34 @@ def pair_points(left: Glyphs, right: Glyphs, rig: StereoRig, symbols: np.ndarray
         return PairPoints(pack_points(m.xyz[keep], m.row[keep], m.col[keep]),
                           m.rejected + int(off.sum()), assisted)
     return PairPoints(pack_points(m.xyz, m.row, m.col), m.rejected, assisted)
+
+
+def _fitted(gray: np.ndarray, uv: np.ndarray, cell: np.ndarray, rect: np.ndarray | None,
+            ncols: int, artwork: ArtworkModel, params: ArtworkFitParams, cam: Any
+            ) -> tuple[np.ndarray, np.ndarray | None]:
+    """One image's centres with its glyphs at cells fitted with the artwork (step 3).
+
+    A cell held by two glyphs is left alone (the lattice does not say which is which).
+    Returns new arrays (the glyph arrays stay as extracted) and the rectified centres with
+    the moved ones rectified again.
+    """
+    if len(uv) == 0:
+        return uv, rect
+    _, first, counts = np.unique(cell, return_index=True, return_counts=True)
+    single = first[(counts == 1) & (cell[first] >= 0)]
+    if len(single) == 0:
+        return uv, rect
+    centres, moved = fit_centres(gray, uv[single], cell[single] // ncols, cell[single] % ncols,
+                                 artwork, params)
+    if not moved.any():
+        return uv, rect
+    index = single[moved]
+    uv = uv.copy()
+    uv[index] = centres[moved]
+    if rect is not None:
+        rect = rect.copy()
+        rect[index] = StereoRig.rectify(cam, uv[index])
+    return uv, rect
 
 
 def _with_rescued(uv: np.ndarray, cell: np.ndarray, rect: np.ndarray | None, found: Rescued,

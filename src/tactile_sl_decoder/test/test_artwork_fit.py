@@ -1,0 +1,150 @@
+"""Glyph centres fitted with the printed artwork (stereo/artwork_fit.py) and the pipeline's
+use of them (artwork_fit.enabled)."""
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from tactile_sl_common.images import to_gray
+from tactile_sl_decoder.extract.extraction import extract_symbols
+from tactile_sl_decoder.frames import bag_frames
+from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
+from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
+from tactile_sl_decoder.stereo.artwork_fit import (
+    ArtworkFitParams,
+    ArtworkModel,
+    fit_centres,
+    lattice_maps,
+)
+from tactile_sl_decoder.tooling.e2e_metrics import frame_metrics
+
+from ros_harness import REPO
+
+BAG = REPO / "bags" / "sphere_deep_small.mcap"
+ON = ArtworkFitParams(enabled=True, blur_sigma_px=0.5)
+
+
+@pytest.fixture(scope="module")
+def model():
+    pattern = load_pattern(default_pattern_path())
+    return ArtworkModel(pattern.array, pattern.primitives)
+
+
+@pytest.fixture(scope="module")
+def still():
+    """A still pad rendered without noise (18 px spacing, 0.5 px blur): the left image, the
+    extraction's centroids of the visible glyphs, their cells and their true centres."""
+    from tactile_sl_sim.artwork import load_artwork
+    from tactile_sl_sim.optics import RigParams, SimulatedCameraPair
+    from tactile_sl_sim.render import Nuisances, Renderer
+
+    renderer = Renderer(load_artwork(), SimulatedCameraPair(RigParams.for_glyph_spacing(18.0)),
+                        supersample=4)
+    nz = Nuisances.from_dict({"blur_sigma": 0.5, "noise_sigma": 0.0, "shot_noise": 0.0,
+                              "vignetting": 0.0})
+    frame = renderer.render([], nz, seed=1, frame_index=0)
+    truth = frame.truth
+    det = extract_symbols(frame.left)
+    found = np.column_stack([det.u, det.v]).astype(np.float64)
+    visible = np.flatnonzero(truth.visible)
+    dist, near = cKDTree(truth.px_left[visible]).query(found)
+    ok = dist < 4.0
+    cell = visible[near[ok]]
+    return frame.left, found[ok], truth.rows[cell], truth.cols[cell], truth.px_left[cell]
+
+
+def _rms(e: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))
+
+
+def test_the_lattice_map_is_recovered_from_the_neighbours():
+    rows, cols = (a.reshape(-1) for a in np.mgrid[0:7, 0:8])
+    jac = np.array([[17.5, 1.2], [-0.8, 18.3]])
+    quad = np.array([[0.05, -0.02, 0.03], [0.01, 0.04, -0.06]])
+    q = np.column_stack([cols, rows]).astype(float)
+    terms = np.column_stack([q[:, 0] ** 2, q[:, 1] ** 2, q[:, 0] * q[:, 1]])
+    uv = 100.0 + q @ jac.T + terms @ quad.T
+    j, qd, rms, count = lattice_maps(uv, rows, cols)
+    inner = (rows == 3) & (cols == 4)
+    assert count[inner] == 25
+    assert rms[inner] < 1e-6
+    # J at the glyph: the linear part of the map there (the quadratic's slope at its cell)
+    slope = jac + np.array([[2 * quad[0, 0] * 4 + quad[0, 2] * 3,
+                             2 * quad[0, 1] * 3 + quad[0, 2] * 4],
+                            [2 * quad[1, 0] * 4 + quad[1, 2] * 3,
+                             2 * quad[1, 1] * 3 + quad[1, 2] * 4]])
+    np.testing.assert_allclose(j[inner][0], slope, atol=1e-6)
+    np.testing.assert_allclose(qd[inner][0], quad, atol=1e-6)
+    corner = (rows == 0) & (cols == 0)
+    assert count[corner] == 9
+
+
+@pytest.mark.parametrize("mirrored", [False, True])
+def test_fitted_centres_are_closer_to_the_truth_than_the_centroids(still, model, mirrored):
+    """Noise-free: the centroid's bias (threshold, window, neighbours) is 0.006-0.012 px per
+    axis; the fit, which models the glyph and its neighbours, leaves about half of it.  A
+    mirrored image (the lattice's map reflects) fits alike."""
+    gray, uv, rows, cols, true = still
+    if mirrored:
+        width = gray.shape[1]
+        gray = np.ascontiguousarray(gray[:, ::-1])
+        uv = np.column_stack([width - 1 - uv[:, 0], uv[:, 1]])
+        true = np.column_stack([width - 1 - true[:, 0], true[:, 1]])
+    fitted, ok = fit_centres(gray, uv, rows, cols, model, ON)
+    assert ok.mean() > 0.95
+    before, after = _rms(uv[ok] - true[ok]), _rms(fitted[ok] - true[ok])
+    assert before > 0.01
+    assert after < 0.6 * before
+    np.testing.assert_array_equal(fitted[~ok], uv[~ok])
+
+
+def test_glyphs_without_a_lattice_around_them_keep_their_centroids(still, model):
+    gray, uv, rows, cols, _true = still
+    # every third cell of every third row: no glyph has a decoded neighbour within two cells
+    sparse = (rows % 3 == 0) & (cols % 3 == 0)
+    fitted, ok = fit_centres(gray, uv[sparse], rows[sparse], cols[sparse], model, ON)
+    assert not ok.any()
+    np.testing.assert_array_equal(fitted, uv[sparse])
+    # a glyph whose neighbours are off any smooth lattice (a kink) keeps its centroid
+    bent = uv.copy()
+    centre = int(np.flatnonzero((rows == 12) & (cols == 12))[0])
+    near = (np.abs(rows - 12) <= 2) & (np.abs(cols - 12) <= 2) & (cols > 12)
+    bent[near, 0] += 3.0
+    fitted, ok = fit_centres(gray, bent, rows, cols, model, ON)
+    assert not ok[centre]
+    assert fitted[centre, 0] == bent[centre, 0]
+    assert ok.mean() > 0.9
+
+
+def test_params_are_checked_and_a_pattern_needs_its_glyphs():
+    with pytest.raises(ValueError, match="artwork_fit.radius"):
+        ArtworkFitParams(radius=5.0).validate()
+    with pytest.raises(ValueError, match="artwork_fit.passes"):
+        StereoPipeline(PatternSpec.load(), params=PipelineParams(
+            threads=1, artwork_fit=ArtworkFitParams(passes=0)))
+    with pytest.raises(ValueError, match="glyph names"):
+        ArtworkModel(np.array([[0, 1], [2, 3]]), ["line", "circle", "triangle"])
+
+
+def test_the_pipeline_triangulates_the_fitted_centres(still):
+    """A pressed frame of a bundled bag: with the fit the points are closer to the truth, the
+    glyph arrays (SymbolArray outputs) stay as extracted, and off is the centroids' points."""
+    frame = list(bag_frames(BAG))[4]
+    images = (to_gray(frame.left_image), to_gray(frame.right_image), frame.left_info,
+              frame.right_info)
+    truth = frame.ground_truth
+    results = {}
+    for enabled in (False, True):
+        params = PipelineParams(threads=1)
+        params.artwork_fit.enabled = enabled
+        pipe = StereoPipeline(PatternSpec.load(), params=params)
+        results[enabled] = pipe.process(*images)
+        pipe.close()
+    off, on = results[False], results[True]
+    np.testing.assert_array_equal(off.left.u, on.left.u)
+    np.testing.assert_array_equal(off.right.v, on.right.v)
+    assert len(on.points) == len(off.points)
+    tol = 0.5 * PatternSpec.load().pitch_m
+    err_off = frame_metrics(off.points, truth, tol).errors_m
+    err_on = frame_metrics(on.points, truth, tol).errors_m
+    rmse_off, rmse_on = (float(np.sqrt(np.mean(np.asarray(e) ** 2))) for e in (err_off, err_on))
+    assert rmse_on < 0.85 * rmse_off
