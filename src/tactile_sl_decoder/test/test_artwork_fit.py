@@ -148,3 +148,24 @@ def test_the_pipeline_triangulates_the_fitted_centres(still):
     err_on = frame_metrics(on.points, truth, tol).errors_m
     rmse_off, rmse_on = (float(np.sqrt(np.mean(np.asarray(e) ** 2))) for e in (err_off, err_on))
     assert rmse_on < 0.85 * rmse_off
+
+
+def test_a_cell_without_its_glyph_is_not_fitted_as_ink(still, model):
+    """A glyph's ink gone (dropout) and so undecoded: the artwork's ink there is not what the
+    image shows, and its neighbour's fit leaves those pixels out."""
+    gray, uv, rows, cols, true = still
+    centre = int(np.flatnonzero((rows == 12) & (cols == 12))[0])
+    erased = (np.abs(rows - 12) <= 1) & (cols == 13)
+    image = gray.copy()
+    h, w = image.shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    for k in np.flatnonzero(erased):
+        near = (xx - true[k, 0]) ** 2 + (yy - true[k, 1]) ** 2 <= (0.45 * 18.0) ** 2
+        image[near] = np.percentile(gray[near], 95)          # the pad's grey there
+    keep = ~erased
+    index = int(np.flatnonzero(np.flatnonzero(keep) == centre)[0])
+    fitted, ok = fit_centres(image, uv[keep], rows[keep], cols[keep], model, ON)
+    assert ok[index]
+    error = float(np.hypot(*(fitted[index] - true[centre])))
+    typical = float(np.median(np.hypot(*(fitted[ok] - true[keep][ok]).T)))
+    assert error < max(3.0 * typical, 0.01)

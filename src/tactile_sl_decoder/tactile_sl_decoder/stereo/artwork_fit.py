@@ -24,7 +24,9 @@ batched over the glyphs; the shift is the derivative's coefficient over b's.  Pi
 weighted by a Gaussian taper in cell units over a disc, the neighbours' ink inside the disc
 being part of the model rather than a nuisance.
 
-A glyph keeps its centroid where the fit cannot be trusted: fewer than ``min_neighbours``
+Pixels nearest a cell without a decoded glyph in this image are left out (a glyph whose ink
+is gone or was not detected: the artwork's ink there is not in the image).  A glyph keeps
+its centroid where the fit cannot be trusted: fewer than ``min_neighbours``
 decoded neighbours within two cells, a lattice the quadratic does not follow (its residual
 over ``max_map_residual_px`` and over ``map_residual_factor`` times the image's median: a
 punch's edge, a fold), a window leaving the image, an ink contrast that is not there, or a
@@ -161,18 +163,28 @@ def lattice_maps(uv: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     dr, dc = offsets[:, 0], offsets[:, 1]
     basis = np.stack([np.ones_like(dc), dc, dr, dc * dc, dr * dr, dc * dr], axis=1)  # (K, 6)
     present = neighbour >= 0
-    w = present.astype(np.float64)
-    pos = uv[np.maximum(neighbour, 0)] * w[..., None]             # (N, K, 2)
-    normal = np.einsum("nk,ka,kb->nab", w, basis, basis)
-    normal += 1e-9 * np.eye(6)
-    rhs = np.einsum("ka,nkc->nac", basis, pos)                     # (N, 6, 2)
-    coef = np.linalg.solve(normal, rhs)                            # (N, 6, 2)
-    resid = (pos - np.einsum("ka,nac->nkc", basis, coef)) * w[..., None]
+    pos = uv[np.maximum(neighbour, 0)] * present[..., None]       # (N, K, 2)
+    coef, resid = _quadratic_fit(basis, pos, present)
     count = present.sum(axis=1)
     rms = np.sqrt(np.sum(resid ** 2, axis=(1, 2)) / np.maximum(count - 6, 1))
     jac = np.transpose(coef[:, 1:3, :], (0, 2, 1))                 # (N, 2, 2): [axis, dc/dr]
     quad = np.transpose(coef[:, 3:6, :], (0, 2, 1))                # (N, 2, 3)
     return jac, quad, rms, count
+
+
+def _quadratic_fit(basis: np.ndarray, pos: np.ndarray, use: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares quadratics of each glyph's neighbours: coefficients and residuals.
+
+    ``basis`` (K, 6) at the K neighbour offsets, ``pos`` (N, K, 2) their positions, used
+    where ``use`` (N, K); returns the coefficients (N, 6, 2) and the residuals (N, K, 2),
+    zero where not used.
+    """
+    w = use.astype(np.float64)
+    normal = np.einsum("nk,ka,kb->nab", w, basis, basis) + 1e-9 * np.eye(6)
+    rhs = np.einsum("ka,nkc->nac", basis, pos * w[..., None])
+    coef = np.linalg.solve(normal, rhs)
+    return coef, (pos - np.einsum("ka,nac->nkc", basis, coef)) * w[..., None]
 
 
 def fit_centres(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.ndarray,
@@ -211,10 +223,15 @@ def fit_centres(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.nda
     disc = dx * dx + dy * dy <= half * half
     window = np.column_stack([dx[disc], dy[disc]]).astype(np.float32)
     index = np.flatnonzero(usable)
+    # the cells decoded in this image (a border of one cell around them): pixels nearest a
+    # cell without a glyph (ink gone, not detected) are not fitted, the artwork's ink there
+    # being what the image lacks
+    decoded = np.zeros((int(rows.max()) + 3, int(cols.max()) + 3), bool)
+    decoded[rows + 1, cols + 1] = True
     for first in range(0, len(index), _BLOCK):
         block = index[first:first + _BLOCK]
         centre, ok = _fit_block(gray, uv[block], rows[block], cols[block], jac[block],
-                                quad[block], textures, model, window, scale, params)
+                                quad[block], textures, model, window, scale, params, decoded)
         out[block[ok]] = centre[ok]
         fitted[block[ok]] = True
     return out, fitted
@@ -223,7 +240,8 @@ def fit_centres(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.nda
 def _fit_block(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                jac: np.ndarray, quad: np.ndarray, textures: tuple[np.ndarray, ...],
                model: ArtworkModel, window: np.ndarray, scale: float,
-               params: ArtworkFitParams) -> tuple[np.ndarray, np.ndarray]:
+               params: ArtworkFitParams, decoded: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`fit_centres` for one batch of usable glyphs: centres (n, 2), fitted (n,)."""
     h, w = gray.shape
     base = np.round(uv)
@@ -248,6 +266,9 @@ def _fit_block(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.ndar
         r2 = qc * qc + qr * qr
         weight = np.exp(np.float32(-0.5 / params.taper ** 2) * r2)
         weight *= (r2 <= np.float32(params.radius ** 2)) & inside
+        near_r = np.clip(np.rint(cell_row + qr).astype(np.intp) + 1, 0, decoded.shape[0] - 1)
+        near_c = np.clip(np.rint(cell_col + qc).astype(np.intp) + 1, 0, decoded.shape[1] - 1)
+        weight *= decoded[near_r, near_c]
         a, ax, ay = _sample(textures, model, cell_col + qc, cell_row + qr)
         # d A / d t: the artwork's gradient carried back through the map (a shift of the
         # centre moves every pixel's cell coordinates by -inv . t)
