@@ -362,7 +362,7 @@ class StereoPipeline:
         pair = pair_points(left, right, rig, self.pattern.array,
                            PairSettings(p.transfer, p.rescue, p.stereo, p.outliers,
                                         p.extraction, p.artwork_fit, self.artwork()),
-                           self._predict, images)
+                           self._predict, images, self._map)
         t2 = time.perf_counter()
         result = StereoResult(pair.points, left, right,
                               {"decode": 1e3 * (t1 - t0), "stereo": 1e3 * (t2 - t1)},

@@ -127,19 +127,22 @@ def test_params_are_checked_and_a_pattern_needs_its_glyphs():
 
 def test_the_pipeline_triangulates_the_fitted_centres(still):
     """A pressed frame of a bundled bag: with the fit the points are closer to the truth, the
-    glyph arrays (SymbolArray outputs) stay as extracted, and off is the centroids' points."""
+    glyph arrays (SymbolArray outputs) stay as extracted, and the two images may be fitted in
+    two threads."""
     frame = list(bag_frames(BAG))[4]
     images = (to_gray(frame.left_image), to_gray(frame.right_image), frame.left_info,
               frame.right_info)
     truth = frame.ground_truth
     results = {}
-    for enabled in (False, True):
-        params = PipelineParams(threads=1)
+    for enabled, threads in ((False, 1), (True, 1), (True, 2)):
+        params = PipelineParams(threads=threads)
         params.artwork_fit.enabled = enabled
         pipe = StereoPipeline(PatternSpec.load(), params=params)
-        results[enabled] = pipe.process(*images)
+        results[enabled, threads] = pipe.process(*images)
         pipe.close()
-    off, on = results[False], results[True]
+    off, on = results[False, 1], results[True, 1]
+    # the two images fitted in two threads: the same points
+    assert results[True, 2].points.tobytes() == on.points.tobytes()
     np.testing.assert_array_equal(off.left.u, on.left.u)
     np.testing.assert_array_equal(off.right.v, on.right.v)
     assert len(on.points) == len(off.points)

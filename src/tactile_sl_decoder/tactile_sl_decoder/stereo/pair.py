@@ -56,7 +56,9 @@ class PairPoints:
 def pair_points(left: Glyphs, right: Glyphs, rig: StereoRig, symbols: np.ndarray,
                 settings: PairSettings,
                 classify: Callable[[np.ndarray], tuple[np.ndarray, Any]],
-                images: tuple[np.ndarray, np.ndarray] | None = None) -> PairPoints:
+                images: tuple[np.ndarray, np.ndarray] | None = None,
+                both: Callable[[Callable[[Any], Any], Any, Any], tuple[Any, Any]] | None = None
+                ) -> PairPoints:
     """Contract points of two decoded images, and per image the cells from the other camera.
 
     ``symbols`` is the pattern array (rows, cols); ``classify`` the classifier (patches ->
@@ -95,10 +97,15 @@ def pair_points(left: Glyphs, right: Glyphs, rig: StereoRig, symbols: np.ndarray
             assisted = (assisted[0] + len(found[0].cell), assisted[1] + len(found[1].cell))
     fit = settings.artwork_fit
     if images is not None and fit is not None and fit.enabled and settings.artwork is not None:
-        uv_l, rect_l = _fitted(images[0], uv_l, cl, rect_l, ncols, settings.artwork, fit,
-                               rig.left)
-        uv_r, rect_r = _fitted(images[1], uv_r, cr, rect_r, ncols, settings.artwork, fit,
-                               rig.right)
+        artwork = settings.artwork
+
+        def fitted(job: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray | None]:
+            gray, uv, cell, rect, cam = job
+            return _fitted(gray, uv, cell, rect, cam, ncols, artwork, fit)
+
+        (uv_l, rect_l), (uv_r, rect_r) = (both or _one_then_other)(
+            fitted, (images[0], uv_l, cl, rect_l, rig.left),
+            (images[1], uv_r, cr, rect_r, rig.right))
     m = match_and_triangulate(rig, uv_l, cl, uv_r, cr, ncols, settings.stereo, rect_l, rect_r)
     # Points off the smooth surface their lattice neighbours define are dropped: a glyph
     # centre pulled aside in one image (shadow edge, dust, texture) or a wrong cell.
@@ -110,8 +117,12 @@ def pair_points(left: Glyphs, right: Glyphs, rig: StereoRig, symbols: np.ndarray
     return PairPoints(pack_points(m.xyz, m.row, m.col), m.rejected, assisted)
 
 
+def _one_then_other(fn: Callable[[Any], Any], a: Any, b: Any) -> tuple[Any, Any]:
+    return fn(a), fn(b)
+
+
 def _fitted(gray: np.ndarray, uv: np.ndarray, cell: np.ndarray, rect: np.ndarray | None,
-            ncols: int, artwork: ArtworkModel, params: ArtworkFitParams, cam: Any
+            cam: Any, ncols: int, artwork: ArtworkModel, params: ArtworkFitParams
             ) -> tuple[np.ndarray, np.ndarray | None]:
     """One image's centres with its glyphs at cells fitted with the artwork (step 3).
 
