@@ -172,3 +172,22 @@ def test_a_cell_without_its_glyph_is_not_fitted_as_ink(still, model):
     error = float(np.hypot(*(fitted[index] - true[centre])))
     typical = float(np.median(np.hypot(*(fitted[ok] - true[keep][ok]).T)))
     assert error < max(3.0 * typical, 0.01)
+
+
+def test_a_neighbour_off_the_lattice_does_not_bend_its_neighbours_fits(still, model):
+    """A worn glyph's centroid, a pixel off its place, is left out of the lattice map its
+    neighbours' fits use (``map_outlier_px``): they are fitted as if it were not there.
+    Without it their lattice departs from its quadratic and they keep their centroids."""
+    gray, uv, rows, cols, true = still
+    worn = int(np.flatnonzero((rows == 12) & (cols == 13))[0])
+    moved = uv.copy()
+    moved[worn] += (1.0, 0.8)
+    near = np.flatnonzero((np.abs(rows - 12) <= 1) & (np.abs(cols - 13) <= 1))
+    near = near[near != worn]
+    clean, _ = fit_centres(gray, uv, rows, cols, model, ON)
+    fitted, ok = fit_centres(gray, moved, rows, cols, model, ON)
+    assert ok[near].all()
+    assert _rms(fitted[near] - true[near]) < 1.2 * _rms(clean[near] - true[near]) + 0.001
+    plain = ArtworkFitParams(enabled=True, blur_sigma_px=0.5, map_outlier_px=0.0)
+    _, ok = fit_centres(gray, moved, rows, cols, model, plain)
+    assert not ok[near].any()

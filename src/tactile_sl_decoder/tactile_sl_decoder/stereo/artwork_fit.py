@@ -54,6 +54,9 @@ PIXEL_BOX_SIGMA = 0.2887
 deviation 1 / sqrt(12) px adds in quadrature to the optics' blur."""
 LATTICE_HALF = 2
 """The lattice map is fitted to the decoded neighbours within this many cells."""
+MAP_OUTLIER_FACTOR = 3.0
+"""A neighbour is off the lattice beyond this many times the image's median distance from
+its quadratic (and beyond ``map_outlier_px``)."""
 _BLOCK = 192
 """Glyphs per batch (bounds the window arrays to a few MB)."""
 
@@ -83,6 +86,9 @@ class ArtworkFitParams:
     map_residual_factor: float = 5.0
     """See max_map_residual_px: the median departure is the centroids' own noise (harsh
     light raises it everywhere; a kink in the lattice only at its glyphs)."""
+    map_outlier_px: float = 0.4
+    """A neighbour whose centroid lies farther than this from the lattice's quadratic (and than
+    3 x the image's median) is left out of it (a worn glyph's centroid; 0: none)."""
     max_shift_px: float = 0.5
     """A fit moving a centre farther than this from its centroid is not used."""
     min_neighbours: int = 9
@@ -97,7 +103,7 @@ class ArtworkFitParams:
 ARTWORK_FIT_SETTINGS = SettingsTable(ArtworkFitParams, ranges={
     "blur_sigma_px": (0.0, 10.0), "radius": (0.3, 2.0), "taper": (0.1, 5.0), "passes": (1, 5),
     "max_map_residual_px": (0.0, 10.0), "map_residual_factor": (1.0, 100.0),
-    "max_shift_px": (0.0, 5.0),
+    "map_outlier_px": (0.0, 10.0), "max_shift_px": (0.0, 5.0),
     "min_neighbours": (6, 25)})
 """The decoder node's live ``artwork_fit.<field>`` parameters."""
 
@@ -144,13 +150,15 @@ class ArtworkModel:
 
 
 def lattice_maps(uv: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-                 half: int = LATTICE_HALF) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                     np.ndarray]:
+                 half: int = LATTICE_HALF, outlier_px: float = 0.0
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each glyph's local map from cell offsets to image pixels, fitted to its neighbours.
 
     ``uv`` (N, 2) px of glyphs at distinct cells ``rows``, ``cols``.  Per glyph, the decoded
     glyphs within ``half`` cells give p = c0 + J (dc, dr) + Q (dc^2, dr^2, dc dr) by least
-    squares.  Returns J (N, 2, 2) px per cell (columns: along a row, i.e. per column step;
+    squares; with ``outlier_px`` > 0 the neighbours farther from it than that and than
+    :data:`MAP_OUTLIER_FACTOR` times the median distance are left out and it is fitted
+    again.  Returns J (N, 2, 2) px per cell (columns: along a row, i.e. per column step;
     per row step), Q (N, 2, 3), the fit's rms residual (N,) px and its point count (N,)
     (fewer than six: J and Q are not meaningful).
     """
@@ -167,6 +175,17 @@ def lattice_maps(uv: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     present = neighbour >= 0
     pos = uv[np.maximum(neighbour, 0)] * present[..., None]       # (N, K, 2)
     coef, resid = _quadratic_fit(basis, pos, present)
+    if outlier_px > 0 and present.any():
+        # a neighbour whose centroid lies off the lattice (a worn glyph's) is left out and
+        # the quadratic fitted again
+        off = np.hypot(resid[..., 0], resid[..., 1])
+        limit = max(outlier_px, MAP_OUTLIER_FACTOR * float(np.median(off[present])))
+        keep = present & (off <= limit)
+        again = (keep.sum(axis=1) >= 6) & (keep != present).any(axis=1)
+        if again.any():
+            coef2, resid2 = _quadratic_fit(basis, pos, keep)
+            coef[again], resid[again] = coef2[again], resid2[again]
+            present = np.where(again[:, None], keep, present)
     count = present.sum(axis=1)
     rms = np.sqrt(np.sum(resid ** 2, axis=(1, 2)) / np.maximum(count - 6, 1))
     jac = np.transpose(coef[:, 1:3, :], (0, 2, 1))                 # (N, 2, 2): [axis, dc/dr]
@@ -204,7 +223,8 @@ def fit_centres(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.nda
     fitted = np.zeros(len(uv), bool)
     if len(uv) < params.min_neighbours:
         return out, fitted
-    jac, quad, map_rms, count = lattice_maps(uv, rows, cols)
+    jac, quad, map_rms, count = lattice_maps(uv, rows, cols,
+                                             outlier_px=params.map_outlier_px)
     det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
     enough = (count >= params.min_neighbours) & (np.abs(det) > 1.0) & np.isfinite(det)
     if not enough.any():
