@@ -25,12 +25,15 @@ weighted by a Gaussian taper in cell units over a disc, the neighbours' ink insi
 being part of the model rather than a nuisance.
 
 Pixels nearest a cell without a decoded glyph in this image are left out (a glyph whose ink
-is gone or was not detected: the artwork's ink there is not in the image).  A glyph keeps
-its centroid where the fit cannot be trusted: fewer than ``min_neighbours``
+is gone or was not detected: the artwork's ink there is not in the image), and so is, from
+the lattice map, a neighbour whose centroid lies off it (``map_outlier_px``: a worn glyph's).
+A glyph keeps its centroid where the fit cannot be trusted: fewer than ``min_neighbours``
 decoded neighbours within two cells, a lattice the quadratic does not follow (its residual
 over ``max_map_residual_px`` and over ``map_residual_factor`` times the image's median: a
 punch's edge, a fold), a window leaving the image, an ink contrast that is not there, or a
-shift beyond ``max_shift_px``.
+shift beyond ``max_shift_px``.  The fit draws on the rims of the neighbours' ink as the
+lattice places them, information beyond the glyph's own that the per-glyph Cramer-Rao bound
+of the sweep does not count.
 
 Measured on the robustness sweep and the touch scenes: docs/robustness.md, "Centres fitted
 with the artwork".  Each pass samples the blurred artwork three times per window pixel, so
