@@ -115,6 +115,17 @@ def test_glyphs_without_a_lattice_around_them_keep_their_centroids(still, model)
     assert ok.mean() > 0.9
 
 
+def test_a_window_without_ink_is_not_fitted(still, model):
+    """No ink (a flat or a noise image where the lattice says glyphs are): no fit, the
+    centroids are kept."""
+    gray, uv, rows, cols, _true = still
+    for image in (np.full_like(gray, 200),
+                  np.random.default_rng(0).integers(0, 256, gray.shape, dtype=np.uint8)):
+        fitted, ok = fit_centres(image, uv, rows, cols, model, ON)
+        assert not ok.any()
+        np.testing.assert_array_equal(fitted, uv)
+
+
 def test_params_are_checked_and_a_pattern_needs_its_glyphs():
     with pytest.raises(ValueError, match="artwork_fit.radius"):
         ArtworkFitParams(radius=5.0).validate()

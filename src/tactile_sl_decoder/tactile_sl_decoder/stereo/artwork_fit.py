@@ -30,8 +30,8 @@ the lattice map, a neighbour whose centroid lies off it (``map_outlier_px``: a w
 A glyph keeps its centroid where the fit cannot be trusted: fewer than ``min_neighbours``
 decoded neighbours within two cells, a lattice the quadratic does not follow (its residual
 over ``max_map_residual_px`` and over ``map_residual_factor`` times the image's median: a
-punch's edge, a fold), a window leaving the image, an ink contrast that is not there, or a
-shift beyond ``max_shift_px``.  The fit draws on the rims of the neighbours' ink as the
+punch's edge, a fold), a window leaving the image, ink less than :data:`MIN_INK_CONTRAST`
+of the pad's level deep, or a shift beyond ``max_shift_px``.  The fit draws on the rims of the neighbours' ink as the
 lattice places them, information beyond the glyph's own that the per-glyph Cramer-Rao bound
 of the sweep does not count.
 
@@ -60,6 +60,9 @@ LATTICE_HALF = 2
 MAP_OUTLIER_FACTOR = 3.0
 """A neighbour is off the lattice beyond this many times the image's median distance from
 its quadratic (and beyond ``map_outlier_px``)."""
+MIN_INK_CONTRAST = 0.2
+"""The fitted ink's depth below the pad, as a fraction of the pad's level, that a fit needs
+(a flat or a noise window gives none; at 0.05 a noise image still fitted some glyphs)."""
 _BLOCK = 192
 """Glyphs per batch (bounds the window arrays to a few MB)."""
 
@@ -317,7 +320,10 @@ def _fit_block(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.ndar
         except np.linalg.LinAlgError:
             return centre, np.zeros(len(uv), bool)
         contrast = coef[:, 1]
-        good = np.isfinite(coef).all(axis=1) & (contrast > 0)
+        # the ink must stand out of the pad: depth b over the pad's level a + b (a flat or
+        # inverted window gives no position, whatever its least-squares shift)
+        pad = coef[:, 0] + contrast
+        good = np.isfinite(coef).all(axis=1) & (contrast > MIN_INK_CONTRAST * np.abs(pad))
         shift = np.where(good[:, None], coef[:, 6:8] / np.where(good, contrast, 1.0)[:, None],
                          0.0)
         centre = centre + np.clip(shift, -1.0, 1.0)
