@@ -31,9 +31,9 @@ A glyph keeps its centroid where the fit cannot be trusted: fewer than ``min_nei
 decoded neighbours within two cells, a lattice the quadratic does not follow (its residual
 over ``max_map_residual_px`` and over ``map_residual_factor`` times the image's median: a
 punch's edge, a fold), a window leaving the image, ink less than :data:`MIN_INK_CONTRAST`
-of the pad's level deep, or a shift beyond ``max_shift_px``.  The fit draws on the rims of the neighbours' ink as the
-lattice places them, information beyond the glyph's own that the per-glyph Cramer-Rao bound
-of the sweep does not count.
+of the pad's level deep, or a shift beyond ``max_shift_px``.  The fit draws on the rims of
+the neighbours' ink as the lattice places them, information beyond the glyph's own that the
+per-glyph Cramer-Rao bound of the sweep does not count.
 
 Measured on the robustness sweep and the touch scenes: docs/robustness.md, "Centres fitted
 with the artwork".  Each pass samples the blurred artwork three times per window pixel, so
