@@ -39,7 +39,8 @@ from tactile_sl_decoder.decode.track import StreamMemory
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.glyphs import Glyphs, PipelineInputError
 from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
-from tactile_sl_decoder.pattern.shapes import default_primitives
+from tactile_sl_decoder.pattern.constraints import Constraints
+from tactile_sl_decoder.pattern.fileio import Pattern
 from tactile_sl_decoder.stereo.artwork_fit import ArtworkFitParams, ArtworkModel
 from tactile_sl_decoder.stereo.outliers import OutlierParams
 from tactile_sl_decoder.stereo.pair import PairSettings, pair_points
@@ -99,11 +100,15 @@ class PatternSpec:
     pitch_m: float = 0.0
     primitives: tuple[str, ...] = ()
     """The glyph of each symbol (the pattern file's names); empty: the defaults for
-    ``symbols`` (:func:`tactile_sl_decoder.pattern.shapes.default_primitives`)."""
+    ``symbols`` (:class:`~tactile_sl_decoder.pattern.fileio.Pattern` fills them in)."""
 
-    def glyph_names(self) -> tuple[str, ...]:
-        """:attr:`primitives`, or the default glyphs of ``symbols``."""
-        return self.primitives or tuple(default_primitives(self.symbols))
+    def to_pattern(self) -> Pattern:
+        """The :class:`~tactile_sl_decoder.pattern.fileio.Pattern` of these parts.
+
+        Empty :attr:`primitives` become the default glyphs of ``symbols``.
+        """
+        return Pattern(self.array, Constraints(self.symbols, self.window, self.min_hamming),
+                       self.pitch_m, list(self.primitives))
 
     @classmethod
     def from_pattern(cls, pattern: Any) -> "PatternSpec":
@@ -378,7 +383,7 @@ class StereoPipeline:
         if not self.params.artwork_fit.enabled:
             return None
         if self._artwork is None:
-            self._artwork = ArtworkModel(self.pattern.array, self.pattern.glyph_names())
+            self._artwork = ArtworkModel(self.pattern.to_pattern())
         return self._artwork
 
     def _in_processes(self, left_gray: np.ndarray, right_gray: np.ndarray, rig: StereoRig

@@ -8,6 +8,8 @@ from tactile_sl_common.images import to_gray
 from tactile_sl_decoder.extract.extraction import extract_symbols
 from tactile_sl_decoder.frames import bag_frames
 from tactile_sl_decoder.pattern import default_pattern_path, load_pattern
+from tactile_sl_decoder.pattern.constraints import Constraints
+from tactile_sl_decoder.pattern.fileio import Pattern
 from tactile_sl_decoder.pipeline import PatternSpec, PipelineParams, StereoPipeline
 from tactile_sl_decoder.stereo.artwork_fit import (
     ArtworkFitParams,
@@ -26,7 +28,7 @@ ON = ArtworkFitParams(enabled=True, blur_sigma_px=0.5)
 @pytest.fixture(scope="module")
 def model():
     pattern = load_pattern(default_pattern_path())
-    return ArtworkModel(pattern.array, pattern.primitives)
+    return ArtworkModel(pattern)
 
 
 @pytest.fixture(scope="module")
@@ -133,7 +135,8 @@ def test_params_are_checked_and_a_pattern_needs_its_glyphs():
         StereoPipeline(PatternSpec.load(), params=PipelineParams(
             threads=1, artwork_fit=ArtworkFitParams(passes=0)))
     with pytest.raises(ValueError, match="glyph names"):
-        ArtworkModel(np.array([[0, 1], [2, 3]]), ["line", "circle", "triangle"])
+        ArtworkModel(Pattern(np.array([[0, 1], [2, 3]]), Constraints(4, (3, 3), 1),
+                             primitives=["line", "circle", "triangle"]))
 
 
 def test_the_pipeline_triangulates_the_fitted_centres(still):

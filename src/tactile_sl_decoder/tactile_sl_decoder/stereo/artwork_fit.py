@@ -42,13 +42,13 @@ the fit costs tens of milliseconds per image: it is off by default (``enabled``)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import SimpleNamespace
 
 import cv2
 import numpy as np
 
 from tactile_sl_common.settings import SettingsTable
 from tactile_sl_decoder.pattern.artwork import render_array
+from tactile_sl_decoder.pattern.fileio import Pattern
 
 ARTWORK_PITCH_PX = 48.0
 """Resolution of the rendered artwork the fit samples, pixels per pitch."""
@@ -117,20 +117,17 @@ ARTWORK_FIT_SETTINGS = SettingsTable(ArtworkFitParams, ranges={
 class ArtworkModel:
     """The pattern's printed albedo at :data:`ARTWORK_PITCH_PX`, blurred as a camera sees it.
 
-    ``array`` (rows, cols) the pattern's symbols and ``primitives`` their glyph names, as in
-    the contract pattern file: the artwork is rasterised exactly as ``tactile-sl pattern
-    render`` draws it (:func:`tactile_sl_decoder.pattern.artwork.render_array`).
+    ``pattern``: the contract pattern (its symbols and their glyph names); the artwork is
+    rasterised exactly as ``tactile-sl pattern render`` draws it
+    (:func:`tactile_sl_decoder.pattern.artwork.render_array`).
     """
 
-    def __init__(self, array: np.ndarray, primitives: list[str] | tuple[str, ...],
-                 pitch_px: float = ARTWORK_PITCH_PX) -> None:
-        array = np.asarray(array, np.uint8)
-        if array.ndim != 2 or int(array.max(initial=0)) >= len(primitives):
-            raise ValueError(f"artwork fit: a pattern of {len(primitives)} glyph names cannot "
-                             f"draw symbols up to {int(array.max(initial=0))}")
-        layout = SimpleNamespace(array=array, rows=array.shape[0], cols=array.shape[1],
-                                 primitives=list(primitives))
-        image, facts = render_array(layout, pitch_px)  # type: ignore[arg-type]
+    def __init__(self, pattern: Pattern, pitch_px: float = ARTWORK_PITCH_PX) -> None:
+        top = int(pattern.array.max(initial=0))
+        if top >= len(pattern.primitives):
+            raise ValueError(f"artwork fit: a pattern of {len(pattern.primitives)} glyph names "
+                             f"cannot draw symbols up to {top}")
+        image, facts = render_array(pattern, pitch_px)
         self.albedo = image.astype(np.float32) / np.float32(255.0)
         self.cell00 = (float(facts["cell00_px"][0]), float(facts["cell00_px"][1]))
         self.pitch_px = float(facts["pitch_px"])
