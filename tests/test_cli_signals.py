@@ -69,3 +69,35 @@ def test_an_interrupt_reported_by_a_compiled_kernel_is_an_interrupt(monkeypatch,
     monkeypatch.setattr(replay_cmd, "run", broken)
     with pytest.raises(SystemError):
         main(["replay", "in.mcap", "-o", "out.mcap"])
+
+
+def test_a_signal_while_numba_loads_a_cached_kernel_is_a_signal(monkeypatch, capsys):
+    """SIGTERM while numba unpickles a cached kernel on its first call: the handler's
+    exception is the cause of ``_numba_unpickle``'s SystemError, itself the cause of the
+    dispatcher's (seen once in 250 signalled replays: exit 1 and a traceback before)."""
+    from tactile_sl_decoder.cli import Terminated, main, replay_cmd
+
+    def terminated_while_loading(_args):
+        try:
+            try:
+                raise Terminated(signal.SIGTERM)
+            except Terminated as exc:
+                raise SystemError("<function _numba_unpickle> returned a result with an "
+                                  "exception set") from exc
+        except SystemError as exc:
+            raise SystemError("CPUDispatcher(<function _plane_thresholds>) returned a "
+                              "result with an exception set") from exc
+
+    monkeypatch.setattr(replay_cmd, "run", terminated_while_loading)
+    assert main(["replay", "in.mcap", "-o", "out.mcap"]) == 143
+    assert capsys.readouterr().err.strip() == "terminated"
+
+    def wrapped_error(_args):
+        try:
+            raise ValueError("not a signal")
+        except ValueError as exc:
+            raise SystemError("returned a result with an exception set") from exc
+
+    monkeypatch.setattr(replay_cmd, "run", wrapped_error)
+    with pytest.raises(SystemError):
+        main(["replay", "in.mcap", "-o", "out.mcap"])

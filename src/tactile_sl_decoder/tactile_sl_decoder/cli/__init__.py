@@ -95,6 +95,24 @@ def _sigterm_as_exception() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+def _interrupt_behind(exc: SystemError) -> KeyboardInterrupt | None:
+    """The Ctrl-C or SIGTERM a SystemError reports, if that is what it is.
+
+    A signal that comes while a compiled kernel (numba) runs, or while numba calls back into
+    Python (loading a cached kernel: ``_numba_unpickle``), is raised by its handler there, and
+    CPython reports it as the cause of a SystemError ("returned a result with an exception
+    set"); the kernel's caller may wrap that SystemError in another one.
+    """
+    cause: BaseException | None = exc
+    for _ in range(8):                      # a chain of SystemErrors, each the next's cause
+        if isinstance(cause, KeyboardInterrupt):
+            return cause
+        if not isinstance(cause, SystemError):
+            return None
+        cause = cause.__cause__
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one subcommand; its exit status (130 after Ctrl-C, 143 after SIGTERM)."""
     words = sys.argv[1:] if argv is None else list(argv)
@@ -109,11 +127,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             try:
                 return int(args.func(args) or 0)
             except SystemError as exc:
-                # a signal that came as a compiled kernel (numba) returned: CPython reports
-                # its handler's exception as the cause of a SystemError ("returned a result
-                # with an exception set")
-                if isinstance(exc.__cause__, KeyboardInterrupt):
-                    raise exc.__cause__ from None
+                interrupt = _interrupt_behind(exc)
+                if interrupt is not None:
+                    raise interrupt from None
                 raise
     except Terminated:
         print("terminated", file=sys.stderr)
