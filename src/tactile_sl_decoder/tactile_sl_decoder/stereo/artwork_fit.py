@@ -131,21 +131,21 @@ class ArtworkModel:
         self.albedo = image.astype(np.float32) / np.float32(255.0)
         self.cell00 = (float(facts["cell00_px"][0]), float(facts["cell00_px"][1]))
         self.pitch_px = float(facts["pitch_px"])
-        self._blurred: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._blurred: dict[float, np.ndarray] = {}
 
-    def blurred(self, sigma_tex: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The albedo blurred by a Gaussian, and its x and y derivatives per artwork pixel.
+    def blurred(self, sigma_tex: float) -> np.ndarray:
+        """The albedo blurred by a Gaussian and its x and y derivatives: (H, W, 3) float32.
 
         ``sigma_tex`` in artwork pixels; the last few blurs are kept (a camera's scale and
-        blur change rarely).
+        blur change rarely).  One image of three channels, so that one remap samples all.
         """
         key = round(float(sigma_tex), 2)
         found = self._blurred.get(key)
         if found is None:
             a = (cv2.GaussianBlur(self.albedo, (0, 0), key) if key > 0
                  else self.albedo)
-            found = (a, cv2.Sobel(a, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
-                     cv2.Sobel(a, cv2.CV_32F, 0, 1, ksize=3, scale=0.125))
+            found = np.dstack([a, cv2.Sobel(a, cv2.CV_32F, 1, 0, ksize=3, scale=0.125),
+                               cv2.Sobel(a, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)])
             if len(self._blurred) >= 4:
                 self._blurred.pop(next(iter(self._blurred)))
             self._blurred[key] = found
@@ -251,8 +251,8 @@ def fit_centres(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.nda
     # the cells decoded in this image (a border of one cell around them): pixels nearest a
     # cell without a glyph (ink gone, not detected) are not fitted, the artwork's ink there
     # being what the image lacks
-    decoded = np.zeros((int(rows.max()) + 3, int(cols.max()) + 3), bool)
-    decoded[rows + 1, cols + 1] = True
+    decoded = np.zeros((int(rows.max()) + 3, int(cols.max()) + 3), np.float32)
+    decoded[rows + 1, cols + 1] = 1.0
     for first in range(0, len(index), _BLOCK):
         block = index[first:first + _BLOCK]
         centre, ok = _fit_block(gray, uv[block], rows[block], cols[block], jac[block],
@@ -263,7 +263,7 @@ def fit_centres(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.nda
 
 
 def _fit_block(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-               jac: np.ndarray, quad: np.ndarray, textures: tuple[np.ndarray, ...],
+               jac: np.ndarray, quad: np.ndarray, textures: np.ndarray,
                model: ArtworkModel, window: np.ndarray, scale: float,
                params: ArtworkFitParams, decoded: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:
@@ -291,25 +291,26 @@ def _fit_block(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.ndar
         r2 = qc * qc + qr * qr
         weight = np.exp(np.float32(-0.5 / params.taper ** 2) * r2)
         weight *= (r2 <= np.float32(params.radius ** 2)) & inside
-        near_r = np.clip(np.rint(cell_row + qr).astype(np.intp) + 1, 0, decoded.shape[0] - 1)
-        near_c = np.clip(np.rint(cell_col + qc).astype(np.intp) + 1, 0, decoded.shape[1] - 1)
-        weight *= decoded[near_r, near_c]
-        a, ax, ay = _sample(textures, model, cell_col + qc, cell_row + qr)
+        # 1 where the nearest cell has a glyph decoded in this image (the border's cells: 0)
+        weight *= cv2.remap(decoded, cell_col + qc + np.float32(1.0), cell_row + qr
+                            + np.float32(1.0), cv2.INTER_NEAREST,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+        sampled = _sample(textures, model, cell_col + qc, cell_row + qr)     # (n, P, 3)
+        a, ax, ay = sampled[..., 0], sampled[..., 1], sampled[..., 2]
         # d A / d t: the artwork's gradient carried back through the map (a shift of the
-        # centre moves every pixel's cell coordinates by -inv . t)
-        design = np.empty(a.shape + (8,), np.float32)
-        design[..., 0] = 1.0
-        design[..., 1] = a
-        np.multiply(ex, np.float32(1.0 / scale), out=design[..., 2])
-        np.multiply(ey, np.float32(1.0 / scale), out=design[..., 3])
-        np.multiply(design[..., 2], a, out=design[..., 4])
-        np.multiply(design[..., 3], a, out=design[..., 5])
-        design[..., 6] = -(ax * to_texture[:, None, 0, 0] + ay * to_texture[:, None, 1, 0])
-        design[..., 7] = -(ax * to_texture[:, None, 0, 1] + ay * to_texture[:, None, 1, 1])
-        weighted = design * weight[..., None]                      # (n, P, 8)
-        normal = np.matmul(weighted.transpose(0, 2, 1), design).astype(np.float64)
-        rhs = np.matmul(weighted.transpose(0, 2, 1), grey[..., None])[..., 0].astype(
-            np.float64)
+        # centre moves every pixel's cell coordinates by -inv . t); one row per unknown
+        design = np.empty((len(uv), 8) + a.shape[1:], np.float32)       # (n, 8, P)
+        design[:, 0] = 1.0
+        design[:, 1] = a
+        np.multiply(ex, np.float32(1.0 / scale), out=design[:, 2])
+        np.multiply(ey, np.float32(1.0 / scale), out=design[:, 3])
+        np.multiply(design[:, 2], a, out=design[:, 4])
+        np.multiply(design[:, 3], a, out=design[:, 5])
+        design[:, 6] = -(ax * to_texture[:, None, 0, 0] + ay * to_texture[:, None, 1, 0])
+        design[:, 7] = -(ax * to_texture[:, None, 0, 1] + ay * to_texture[:, None, 1, 1])
+        weighted = design * weight[:, None, :]                         # (n, 8, P)
+        normal = np.matmul(weighted, design.transpose(0, 2, 1)).astype(np.float64)
+        rhs = np.matmul(weighted, grey[..., None])[..., 0].astype(np.float64)
         normal += 1e-9 * np.eye(8) * np.maximum(
             np.trace(normal, axis1=1, axis2=2), 1.0)[:, None, None]
         try:
@@ -346,10 +347,11 @@ def _cell_offsets(ex: np.ndarray, ey: np.ndarray, inv: np.ndarray, quad: np.ndar
             inv[:, None, 1, 0] * sx + inv[:, None, 1, 1] * sy)
 
 
-def _sample(textures: tuple[np.ndarray, ...], model: ArtworkModel, col: np.ndarray,
-            row: np.ndarray) -> list[np.ndarray]:
-    """The blurred albedo and its derivatives at cell coordinates (bilinear)."""
+def _sample(textures: np.ndarray, model: ArtworkModel, col: np.ndarray,
+            row: np.ndarray) -> np.ndarray:
+    """The blurred albedo and its derivatives at cell coordinates (bilinear): (..., 3)."""
     x = np.float32(model.cell00[0]) + col * np.float32(model.pitch_px)
     y = np.float32(model.cell00[1]) + row * np.float32(model.pitch_px)
-    return [cv2.remap(t, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            for t in textures]
+    out: np.ndarray = cv2.remap(textures, x, y, cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)
+    return out
