@@ -47,57 +47,46 @@ def test_replay_stopped_midway_leaves_no_temporary_file(tmp_path, signum, status
     assert "Traceback" not in text, text
 
 
-def test_an_interrupt_reported_by_a_compiled_kernel_is_an_interrupt(monkeypatch, capsys):
-    """Ctrl-C as a numba kernel returns comes back as a SystemError caused by the interrupt
-    (seen once in ~30 signalled replays): exit 130 and one line, not a traceback."""
-    from tactile_sl_decoder.cli import main, replay_cmd
-
-    def interrupted_in_a_kernel(_args):
-        try:
-            raise KeyboardInterrupt
-        except KeyboardInterrupt as exc:
-            raise SystemError("CPUDispatcher(<function knn_within>) returned a result with "
-                              "an exception set") from exc
-
-    monkeypatch.setattr(replay_cmd, "run", interrupted_in_a_kernel)
-    assert main(["replay", "in.mcap", "-o", "out.mcap"]) == 130
-    assert capsys.readouterr().err.strip() == "interrupted"
-
-    def broken(_args):
-        raise SystemError("a SystemError of its own")
-
-    monkeypatch.setattr(replay_cmd, "run", broken)
-    with pytest.raises(SystemError):
-        main(["replay", "in.mcap", "-o", "out.mcap"])
+def _replay_raising(first: BaseException | None, wrappers: int, message: str):
+    """A replay command raising ``first`` reported as CPython reports an exception set inside
+    a compiled call: ``wrappers`` SystemErrors, each caused by the one before."""
+    def run(_args):
+        cause: BaseException | None = first
+        for _ in range(wrappers):
+            try:
+                raise SystemError(message) from cause
+            except SystemError as exc:
+                cause = exc
+        assert cause is not None
+        raise cause
+    return run
 
 
-def test_a_signal_while_numba_loads_a_cached_kernel_is_a_signal(monkeypatch, capsys):
-    """SIGTERM while numba unpickles a cached kernel on its first call: the handler's
-    exception is the cause of ``_numba_unpickle``'s SystemError, itself the cause of the
-    dispatcher's (seen once in 250 signalled replays: exit 1 and a traceback before)."""
+@pytest.mark.parametrize("signalled, wrappers, status, line", [
+    # Ctrl-C as a numba kernel returns (seen once in ~30 signalled replays)
+    ("interrupt", 1, 130, "interrupted"),
+    # SIGTERM while numba unpickles a cached kernel on its first call: _numba_unpickle's
+    # SystemError, then the dispatcher's (seen once in 250 signalled replays: exit 1 and a
+    # traceback before)
+    ("terminate", 2, 143, "terminated")])
+def test_a_signal_reported_by_compiled_code_is_that_signal(monkeypatch, capsys, signalled,
+                                                           wrappers, status, line):
     from tactile_sl_decoder.cli import Terminated, main, replay_cmd
 
-    def terminated_while_loading(_args):
-        try:
-            try:
-                raise Terminated(signal.SIGTERM)
-            except Terminated as exc:
-                raise SystemError("<function _numba_unpickle> returned a result with an "
-                                  "exception set") from exc
-        except SystemError as exc:
-            raise SystemError("CPUDispatcher(<function _plane_thresholds>) returned a "
-                              "result with an exception set") from exc
+    first = KeyboardInterrupt() if signalled == "interrupt" else Terminated(signal.SIGTERM)
+    monkeypatch.setattr(replay_cmd, "run", _replay_raising(
+        first, wrappers, "CPUDispatcher(<function knn_within>) returned a result with an "
+        "exception set"))
+    assert main(["replay", "in.mcap", "-o", "out.mcap"]) == status
+    assert capsys.readouterr().err.strip() == line
 
-    monkeypatch.setattr(replay_cmd, "run", terminated_while_loading)
-    assert main(["replay", "in.mcap", "-o", "out.mcap"]) == 143
-    assert capsys.readouterr().err.strip() == "terminated"
 
-    def wrapped_error(_args):
-        try:
-            raise ValueError("not a signal")
-        except ValueError as exc:
-            raise SystemError("returned a result with an exception set") from exc
+@pytest.mark.parametrize("first, wrappers", [(None, 1), (ValueError("not a signal"), 1),
+                                             (ValueError("not a signal"), 2)])
+def test_a_system_error_that_reports_no_signal_stays_one(monkeypatch, first, wrappers):
+    from tactile_sl_decoder.cli import main, replay_cmd
 
-    monkeypatch.setattr(replay_cmd, "run", wrapped_error)
+    monkeypatch.setattr(replay_cmd, "run", _replay_raising(
+        first, wrappers, "returned a result with an exception set"))
     with pytest.raises(SystemError):
         main(["replay", "in.mcap", "-o", "out.mcap"])
