@@ -33,17 +33,20 @@ def test_bench_pipeline_in_process_runs_with_floor_touch_and_both_carry_settings
 
 def test_bench_touch_prints_the_slip_table_and_times():
     """The touch bags, one slip scene and the lighting scenes (rendered on the fly): the
-    slip table with its acceptance lines, the lighting table and the slip estimate's time
-    beside the pipeline's (the shape scenes' table: test_touch_metrics)."""
+    slip table with its acceptance lines, the lighting table with its per-draw rows and the
+    slip estimate's time beside the pipeline's (the shape scenes' table: test_touch_metrics)."""
     out = subprocess.run(
         [sys.executable, str(REPO / "tools" / "bench_touch.py"), "--repeat", "1",
-         "--only", "slip_halfspace", "--no-shapes"],
+         "--only", "slip_halfspace", "--no-shapes", "--per-draw"],
         capture_output=True, text=True, timeout=300, env=ros_env(next_domain_id()))
     assert out.returncode == 0, out.stderr[-3000:]
     for section in ("slip_halfspace", "gross slip:", "slip margin |error|",
                     "friction coefficient |error|", "of which slip", "pipeline (total)",
-                    "light_harsh_mjpeg", "dCen worst mm"):     # the lighting table
+                    "light_harsh_mjpeg", "dCen worst mm",      # the lighting table
+                    "per draw: signed normal force error %", "columns: the file's draw"):
         assert section in out.stdout, section
+    # --per-draw: each loaded frame of each lighting scene, the file's one draw
+    assert out.stdout.count("  Fn  0.10 N  dFn %") == 3, out.stdout[-3000:]
 
 
 def test_bench_sweep_runs_a_row_writes_its_figures_and_its_picture(tmp_path):

@@ -129,6 +129,9 @@ def main() -> int:
     parser.add_argument("--light-seeds", type=int, nargs="+", default=[], metavar="SEED",
                         help="render the lighting scenes once per noise seed and pool the "
                         "draws (default: the file's own seed)")
+    parser.add_argument("--per-draw", action="store_true",
+                        help="also each lighting draw's signed normal force and centroid error "
+                        "per load (with --light-seeds: bias or scatter)")
     parser.add_argument("--artwork-fit", action="store_true",
                         help="the decoder's artwork fit on (artwork_fit.enabled: glyph centres "
                         "fitted with the printed artwork)")
@@ -182,10 +185,12 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
                                             if "touch" in f.timings_ms)
                     compared.append((name, old, frames))
             pooled: dict[str, tuple[list, list]] = {}     # a scene's draws (--light-seeds)
+            draws: list[tuple[str, str, list]] = []       # (scene, bag name, frames)
             for name, path, sensor in light_bags:
                 frames = evaluate_touch_bag(path, pipe, sensor, progress=progress,
                                             touch_params=weighted)
                 _collect(times, frames)
+                draws.append((name, pathlib.Path(path).stem, frames))
                 old = []
                 if args.compare:
                     old = evaluate_touch_bag(path, pipe, sensor, touch_params=unweighted)
@@ -209,6 +214,8 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
                 report = format_report(per_bag)[0]
                 light_report = (light_table(compared, args.compare)
                                 if light_bags or args.compare else None)
+                if light_report and args.per_draw:
+                    light_report += "\n\n" + light_draws_table(draws)
                 slip_report = format_slip_report(per_scene) if per_scene else None
                 shape_report = format_shape_report(per_shape) if per_shape else None
     finally:
@@ -263,6 +270,32 @@ def _light_figures(frames: list) -> dict[str, float]:
                                      / np.linalg.norm(f.force_true)) for f in loaded),
                       default=np.nan),
         "area": max((abs(f.area_err_pct) for f in frames if f.contact_true), default=np.nan)}
+
+
+def light_draws_table(draws: list[tuple[str, str, list]]) -> str:
+    """Per lighting scene and load, each draw's signed normal force error and centroid error.
+
+    What the pooled table's worst frame hides: whether a load's error is a bias (one sign in
+    every draw) or scatter.  ``draws``: (scene, bag name, evaluated frames) per rendered bag.
+    """
+    seeds = [bag.rsplit("_seed", 1)[1] for _, bag, _ in draws if "_seed" in bag]
+    columns = "seeds " + ", ".join(dict.fromkeys(seeds)) if seeds else "the file's draw"
+    lines = [f"per draw: signed normal force error %, centroid error mm; columns: {columns}"]
+    for scene in dict.fromkeys(name for name, _, _ in draws):
+        runs = [frames for name, _, frames in draws if name == scene]
+        lines.append(f"{scene}:")
+        for k, frame in enumerate(runs[0]):
+            if frame.force_true is None or not np.any(frame.force_true):
+                continue
+            same = [frames[k] for frames in runs if len(frames) > k]
+            fn = " ".join(f"{f.normal_err_pct:+6.2f}" for f in same)
+            cen = " ".join(f"{1e3 * f.centroid_err:5.3f}" if f.contact_true else "    -"
+                           for f in same)
+            errors = np.array([f.normal_err_pct for f in same])
+            sd = float(errors.std(ddof=1)) if len(errors) > 1 else 0.0
+            lines.append(f"  Fn {-float(frame.force_true[2]):5.2f} N  dFn % {fn}   (mean "
+                         f"{errors.mean():+.2f}, sd {sd:.2f})   dCen mm {cen}")
+    return "\n".join(lines)
 
 
 def _was(old: dict[str, float] | None, key: str) -> float | None:
