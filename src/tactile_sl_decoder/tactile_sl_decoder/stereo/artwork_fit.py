@@ -283,7 +283,6 @@ def _fit_block(gray: np.ndarray, uv: np.ndarray, rows: np.ndarray, cols: np.ndar
     cell_row = rows[:, None].astype(np.float32)
     centre = uv.copy()
     ok = inside.mean(axis=1) >= 0.9
-    contrast = np.zeros(len(uv))
     for _ in range(params.passes):
         ex = px - centre[:, None, 0].astype(np.float32)
         ey = py - centre[:, None, 1].astype(np.float32)
