@@ -50,12 +50,18 @@ import pathlib
 import sys
 import tempfile
 import time
+from typing import Any
 
 import numpy as np
 
 from tactile_sl_common.elasticity import Elastomer
 from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
-from tactile_sl_decoder.tooling.bag_runs import evaluate_touch_bag
+from tactile_sl_decoder.tooling.bag_runs import displacement_errors, evaluate_touch_bag
+from tactile_sl_decoder.tooling.light_report import (
+    light_bound_table,
+    light_draws_table,
+    light_table,
+)
 from tactile_sl_decoder.tooling.slip_metrics import format_slip_report, slip_frames
 from tactile_sl_decoder.tooling.touch_metrics import (
     format_report,
@@ -74,7 +80,6 @@ CONTROL_BAG = "no_contact"
 SLIP_SCENES = BAGS / "slip_scenes.yaml"
 SHAPE_SCENES = BAGS / "shape_scenes.yaml"
 LIGHT_SCENES = BAGS / "light_scenes.yaml"
-CLEAN_LIGHT = "light_clean"
 
 
 def render_scenes(scenes_file: pathlib.Path, out: pathlib.Path, only: list[str],
@@ -132,6 +137,11 @@ def main() -> int:
     parser.add_argument("--per-draw", action="store_true",
                         help="also each lighting draw's signed normal force and centroid error "
                         "per load (with --light-seeds: bias or scatter)")
+    parser.add_argument("--bound", action="store_true",
+                        help="with --light-seeds (3 or more): the Cramer-Rao bound of each "
+                        "lighting scene's normal force and centroid per load, from the draws' "
+                        "displacement noise and from the images' point bounds, beside the "
+                        "touch stage's scatter over the draws (about 20 s per scene)")
     parser.add_argument("--artwork-fit", action="store_true",
                         help="the decoder's artwork fit on (artwork_fit.enabled: glyph centres "
                         "fitted with the printed artwork)")
@@ -139,6 +149,8 @@ def main() -> int:
                         help="the touch bags and lighting scenes without the per-cell weights "
                         "too (the touch stage before issue 25), side by side")
     args = parser.parse_args()
+    if args.bound and (args.no_light or len(set(args.light_seeds)) < 3):
+        parser.error("--bound needs the lighting scenes with --light-seeds of 3 or more seeds")
     with tempfile.TemporaryDirectory(prefix="bench_touch_") as tmp:
         shape_bags = ([] if args.no_shapes else
                       render_scenes(args.shape_scenes, pathlib.Path(tmp) / "shapes", []))
@@ -184,22 +196,8 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
                     unweighted_times.extend(f.timings_ms["touch"] for f in old
                                             if "touch" in f.timings_ms)
                     compared.append((name, old, frames))
-            pooled: dict[str, tuple[list, list]] = {}     # a scene's draws (--light-seeds)
-            draws: list[tuple[str, str, list]] = []       # (scene, bag name, frames)
-            for name, path, sensor in light_bags:
-                frames = evaluate_touch_bag(path, pipe, sensor, progress=progress,
-                                            touch_params=weighted)
-                _collect(times, frames)
-                draws.append((name, pathlib.Path(path).stem, frames))
-                old = []
-                if args.compare:
-                    old = evaluate_touch_bag(path, pipe, sensor, touch_params=unweighted)
-                    unweighted_times.extend(f.timings_ms["touch"] for f in old
-                                            if "touch" in f.timings_ms)
-                before, after = pooled.setdefault(name, ([], []))
-                before.extend(old)
-                after.extend(frames)
-            compared.extend((name, old, new) for name, (old, new) in pooled.items())
+            draws, noise = _light_pass(args, light_bags, pipe, progress, times,
+                                       unweighted_times, compared, rep == 0)
             per_shape = []
             for name, path, sensor in shape_bags:
                 frames = evaluate_touch_bag(path, pipe, sensor, progress=progress)
@@ -216,6 +214,8 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
                                 if light_bags or args.compare else None)
                 if light_report and args.per_draw:
                     light_report += "\n\n" + light_draws_table(draws)
+                if light_report and args.bound:
+                    light_report += "\n\n" + light_bound_table(args.light_scenes, noise, draws)
                 slip_report = format_slip_report(per_scene) if per_scene else None
                 shape_report = format_shape_report(per_shape) if per_shape else None
     finally:
@@ -257,81 +257,37 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
     return 0
 
 
-def _light_figures(frames: list) -> dict[str, float]:
-    """Pooled displacement RMSE (m) and the worst centroid (m), normal and vector errors (%)."""
-    cells = sum(f.cells for f in frames)
-    sq = sum(f.disp_rmse ** 2 * f.cells for f in frames if f.cells)
-    loaded = [f for f in frames if f.force_true is not None and np.any(f.force_true)]
-    return {
-        "rmse": float(np.sqrt(sq / cells)) if cells else float("nan"),
-        "centroid": max((f.centroid_err for f in frames if f.contact_true), default=np.nan),
-        "normal": max((abs(f.normal_err_pct) for f in loaded), default=np.nan),
-        "vector": max((100.0 * float(np.linalg.norm(f.force_est - f.force_true)
-                                     / np.linalg.norm(f.force_true)) for f in loaded),
-                      default=np.nan),
-        "area": max((abs(f.area_err_pct) for f in frames if f.contact_true), default=np.nan)}
+def _light_pass(args: argparse.Namespace,
+                light_bags: list[tuple[str, pathlib.Path, SensorConfig]], pipe: StereoPipeline,
+                progress: Any, times: dict[str, list[float]], unweighted_times: list[float],
+                compared: list[tuple[str, list, list]], first: bool
+                ) -> tuple[list[tuple[str, str, list]], dict[str, list[dict]]]:
+    """One pass over the lighting bags: their draws' frames and raw errors.
 
-
-def light_draws_table(draws: list[tuple[str, str, list]]) -> str:
-    """Per lighting scene and load, each draw's signed normal force error and centroid error.
-
-    What the pooled table's worst frame hides: whether a load's error is a bias (one sign in
-    every draw) or scatter.  ``draws``: (scene, bag name, evaluated frames) per rendered bag.
+    The frames are also appended to ``compared``, pooled per scene; the raw errors (the touch
+    bound's noise) are taken with ``--bound`` on the ``first`` pass only.
     """
-    seeds = [bag.rsplit("_seed", 1)[1] for _, bag, _ in draws if "_seed" in bag]
-    columns = "seeds " + ", ".join(dict.fromkeys(seeds)) if seeds else "the file's draw"
-    lines = [f"per draw: signed normal force error %, centroid error mm; columns: {columns}"]
-    for scene in dict.fromkeys(name for name, _, _ in draws):
-        runs = [frames for name, _, frames in draws if name == scene]
-        lines.append(f"{scene}:")
-        for k, frame in enumerate(runs[0]):
-            if frame.force_true is None or not np.any(frame.force_true):
-                continue
-            same = [frames[k] for frames in runs if len(frames) > k]
-            fn = " ".join(f"{f.normal_err_pct:+6.2f}" for f in same)
-            cen = " ".join(f"{1e3 * f.centroid_err:5.3f}" if f.contact_true else "    -"
-                           for f in same)
-            errors = np.array([f.normal_err_pct for f in same])
-            sd = float(errors.std(ddof=1)) if len(errors) > 1 else 0.0
-            lines.append(f"  Fn {-float(frame.force_true[2]):5.2f} N  dFn % {fn}   (mean "
-                         f"{errors.mean():+.2f}, sd {sd:.2f})   dCen mm {cen}")
-    return "\n".join(lines)
-
-
-def _was(old: dict[str, float] | None, key: str) -> float | None:
-    return None if old is None else old[key]
-
-
-def light_table(compared: list[tuple[str, list, list]], both: bool) -> str:
-    """The lighting table: per bag or scene its figures (``both``: unweighted -> weighted).
-
-    The ratio is to the clean scene's RMSE (``light_clean``) of the same variant.
-    """
-    figures = {name: (_light_figures(old) if old else None, _light_figures(new))
-               for name, old, new in compared}
-    clean = figures.get(CLEAN_LIGHT)
-    lines = [f"{'scene':<20} {'dRMSE um':>16} {'x clean':>12} {'dCen worst mm':>16} "
-             f"{'dFn worst %':>14} {'|dF| worst %':>14} {'|dArea| worst %':>16}"]
-
-    def cell(old: float | None, new: float, scale: float, fmt: str, width: int) -> str:
-        text = f"{new * scale:{fmt}}"
-        if both and old is not None:
-            text = f"{old * scale:{fmt}} -> {text}"
-        return f"{text:>{width}}"
-
-    for name, (old, new) in figures.items():
-        ratio_new = new["rmse"] / clean[1]["rmse"] if clean else np.nan
-        ratio_old = (old["rmse"] / clean[0]["rmse"] if old is not None and clean
-                     and clean[0] is not None else None)
-        lines.append(f"{name:<20} {cell(_was(old, 'rmse'), new['rmse'], 1e6, '.2f', 16)} "
-                     f"{cell(ratio_old, ratio_new, 1.0, '.2f', 12)} "
-                     f"{cell(_was(old, 'centroid'), new['centroid'], 1e3, '.3f', 16)} "
-                     f"{cell(_was(old, 'normal'), new['normal'], 1.0, '.2f', 14)} "
-                     f"{cell(_was(old, 'vector'), new['vector'], 1.0, '.2f', 14)} "
-                     f"{cell(_was(old, 'area'), new['area'], 1.0, '.1f', 16)}")
-    lines.append("limits (issue 25, harsh rows): dRMSE <= 2 x clean, dCen <= 0.1 mm, "
-                 "force within 2 %; clean rows and bags: no worse")
-    return "\n".join(lines)
+    pooled: dict[str, tuple[list, list]] = {}     # a scene's draws (--light-seeds)
+    draws: list[tuple[str, str, list]] = []       # (scene, bag name, frames)
+    noise: dict[str, list[dict]] = {}             # --bound: the draws' raw errors
+    for name, path, sensor in light_bags:
+        frames = evaluate_touch_bag(path, pipe, sensor, progress=progress,
+                                    touch_params=TouchParams())
+        _collect(times, frames)
+        draws.append((name, pathlib.Path(path).stem, frames))
+        old = []
+        if args.compare:
+            old = evaluate_touch_bag(path, pipe, sensor,
+                                     touch_params=TouchParams(weights=WeightParams(enabled=False)))
+            unweighted_times.extend(f.timings_ms["touch"] for f in old
+                                    if "touch" in f.timings_ms)
+        if args.bound and first:
+            noise.setdefault(name, []).append(displacement_errors(path, pipe, sensor))
+        before, after = pooled.setdefault(name, ([], []))
+        before.extend(old)
+        after.extend(frames)
+    compared.extend((name, old, new) for name, (old, new) in pooled.items())
+    return draws, noise
 
 
 def _collect(times: dict[str, list[float]], frames: list) -> None:

@@ -4,10 +4,13 @@
 only) over a bag (the same path as ``tactile-sl replay``) and returns per-frame and per-bag
 figures.  ``evaluate_touch_bag`` runs it with the touch stage and returns the touch figures
 of every frame (definitions in :mod:`~tactile_sl_decoder.tooling.e2e_metrics` and
-:mod:`~tactile_sl_decoder.tooling.touch_metrics`).
+:mod:`~tactile_sl_decoder.tooling.touch_metrics`).  ``displacement_errors`` gives each
+frame's measured displacement error per cell, as the points give it (the touch bound's
+noise, :mod:`~tactile_sl_decoder.tooling.touch_bound`).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, TextIO
 
@@ -32,6 +35,7 @@ from tactile_sl_decoder.tooling.touch_metrics import (
     read_truths,
 )
 from tactile_sl_decoder.touch.stage import TouchParams
+from tactile_sl_decoder.touch.weights import WeightParams
 
 
 def flip_labels_hook(rate: float, symbols: int, seed: int = 0) -> Callable[[Any, Any], None]:
@@ -134,6 +138,45 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
         out.append(m)
     if progress is not None:
         progress.write("\n")
+    return out
+
+
+@dataclass(frozen=True)
+class DisplacementErrors:
+    """One frame's measured displacement minus the truth, per cell decoded in both (pad frame)."""
+
+    cells: np.ndarray      # (N,) row * 1_000_003 + col, ascending
+    errors: np.ndarray     # (N, 3) m
+    rest_xy: np.ndarray    # (N, 2) m, the cells' true rest positions
+
+
+def displacement_errors(path: str | Path, pipeline: Any, sensor: Any,
+                        namespace: str = "/tactile") -> dict[int, DisplacementErrors]:
+    """Per touched frame (by stamp, ns) of a touch scene's bag, its displacement errors.
+
+    The displacement is as the points give it (reference = the first frame, the per-cell
+    weights off: no cleaning, no fitted field), so that its errors are the points' own.
+    """
+    truths = read_truths(path, namespace)
+    step = SensorStep(pipeline, sensor, TouchParams(weights=WeightParams(enabled=False)))
+    step.forget_frames()
+    out: dict[int, DisplacementErrors] = {}
+    for frame in bag_frames(path, namespace, ground_truth=False):
+        truth = truths.get(frame.stamp_ns)
+        if truth is None:
+            continue
+        was_ready = step.touch_ready
+        outputs = _process(step, frame, None)
+        result = None if outputs is None else outputs.touch.result
+        if not was_ready or result is None:
+            continue
+        key = result.rows.astype(np.int64) * 1_000_003 + result.cols
+        tkey = truth.rows.astype(np.int64) * 1_000_003 + truth.cols
+        cells, i, j = np.intersect1d(key, tkey, assume_unique=True, return_indices=True)
+        rest = np.asarray(truth.position, np.float64) - np.asarray(truth.displacement)
+        out[frame.stamp_ns] = DisplacementErrors(
+            cells, np.asarray(result.displacement, np.float64)[i] - truth.displacement[j],
+            rest[j, :2])
     return out
 
 
