@@ -81,12 +81,14 @@ def test_bench_sweep_runs_a_row_writes_its_figures_and_its_picture(tmp_path):
     assert cv2.imread(str(tmp_path / "jpeg_mild_bound.png")).shape == (520, 1280, 3)
 
 
-def test_bench_touch_bound_needs_three_lighting_draws():
+def test_bench_touch_bound_needs_five_lighting_draws():
     """--bound takes each cell's noise from the draws' scatter: refused (exit 2, before any
-    rendering) without three or more seeds."""
-    for extra in ([], ["--light-seeds", "11", "12"], ["--no-light", "--light-seeds", "1", "2", "3"]):
+    rendering) without five or more seeds (fewer: each cell's variance is too uncertain to
+    invert)."""
+    for extra in ([], ["--light-seeds", "11", "12", "13", "14"],
+                  ["--no-light", "--light-seeds", "1", "2", "3", "4", "5"]):
         out = subprocess.run(
             [sys.executable, str(REPO / "tools" / "bench_touch.py"), "--bound", *extra],
             capture_output=True, text=True, timeout=120, env=ros_env(next_domain_id()))
         assert out.returncode == 2, out.stderr[-2000:]
-        assert "--bound needs the lighting scenes with --light-seeds of 3 or more" in out.stderr
+        assert "--bound needs the lighting scenes with --light-seeds of 5 or more" in out.stderr

@@ -138,7 +138,7 @@ def main() -> int:
                         help="also each lighting draw's signed normal force and centroid error "
                         "per load (with --light-seeds: bias or scatter)")
     parser.add_argument("--bound", action="store_true",
-                        help="with --light-seeds (3 or more): the Cramer-Rao bound of each "
+                        help="with --light-seeds (5 or more): the Cramer-Rao bound of each "
                         "lighting scene's normal force and centroid per load, from the draws' "
                         "displacement noise and from the images' point bounds, beside the "
                         "touch stage's scatter over the draws (about 20 s per scene)")
@@ -149,8 +149,9 @@ def main() -> int:
                         help="the touch bags and lighting scenes without the per-cell weights "
                         "too (the touch stage before issue 25), side by side")
     args = parser.parse_args()
-    if args.bound and (args.no_light or len(set(args.light_seeds)) < 3):
-        parser.error("--bound needs the lighting scenes with --light-seeds of 3 or more seeds")
+    if args.bound and (args.no_light or len(set(args.light_seeds)) < 5):
+        parser.error("--bound needs the lighting scenes with --light-seeds of 5 or more seeds "
+                     "(each cell's noise is its variance over the draws)")
     with tempfile.TemporaryDirectory(prefix="bench_touch_") as tmp:
         shape_bags = ([] if args.no_shapes else
                       render_scenes(args.shape_scenes, pathlib.Path(tmp) / "shapes", []))

@@ -1,6 +1,5 @@
 """The touch bound: the load model's derivatives, the information and what attains it."""
 import math
-import pathlib
 
 import numpy as np
 import pytest
@@ -24,8 +23,10 @@ from tactile_sl_decoder.touch.reference import nominal_positions
 from tactile_sl_sim.loads import LoadContact
 from tactile_sl_sim.scenes import load_scenes
 
+from ros_harness import BAGS
+
 PAD = Elastomer(3.0e5, 0.49, 0.0)
-LIGHT_SCENES = pathlib.Path(__file__).resolve().parents[3] / "bags" / "light_scenes.yaml"
+LIGHT_SCENES = BAGS / "light_scenes.yaml"
 
 
 def _cells(step: float = 5e-4, half: int = 10) -> np.ndarray:

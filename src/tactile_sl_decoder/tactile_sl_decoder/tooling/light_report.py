@@ -13,6 +13,14 @@ import sys
 
 import numpy as np
 
+from tactile_sl_decoder.tooling.touch_bound import (
+    centre_within_share,
+    scene_bounds,
+    within_share,
+)
+from tactile_sl_sim.scenes import load_scenes
+from tactile_sl_sim.synth import RendererCache
+
 CLEAN_LIGHT = "light_clean"
 """The scene whose displacement RMSE the others are compared with."""
 
@@ -68,14 +76,6 @@ def light_bound_table(scenes_file: pathlib.Path, noise: dict[str, list[dict]],
     columns: the chance that an estimator at the images' bound meets the harsh rows' limits
     (force within 2 %, centroid within 0.1 mm) in one draw and in every draw.
     """
-    from tactile_sl_decoder.tooling.touch_bound import (
-        centre_within_share,
-        scene_bounds,
-        within_share,
-    )
-    from tactile_sl_sim.scenes import load_scenes
-    from tactile_sl_sim.synth import RendererCache
-
     scenes = {s.name: s for s in load_scenes(scenes_file)}
     cache = RendererCache()
     n_draws = max(len(v) for v in noise.values())

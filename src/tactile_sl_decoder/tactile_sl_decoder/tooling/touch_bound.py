@@ -40,7 +40,10 @@ import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 from tactile_sl_common.elasticity import surface_displacement
+from tactile_sl_decoder.stereo.stereo import StereoRig
+from tactile_sl_decoder.tooling.centre_bound import frame_point_bounds
 from tactile_sl_sim.loads import LoadContact, load_traction
+from tactile_sl_sim.optics import RigParams
 
 PARAMETERS = ("fx", "fy", "fz", "x", "y", "radius")
 """What the estimator does not know: the force (N), the centre (m) and the profile's radius (m)."""
@@ -120,7 +123,8 @@ def fisher_information(jacobian: np.ndarray, variance: np.ndarray,
     ``jacobian`` (N, 3, P), ``variance`` (N, 3) m^2 (an infinite or NaN variance: the axis
     carries nothing).  ``dof``: the variances are sample variances of that many degrees of
     freedom; the information is scaled by (dof - 2) / dof, the mean of an inverse
-    chi-square, so that noisy variances do not overstate it (dof <= 2: no correction).
+    chi-square, so that noisy variances do not overstate it (dof <= 2: none exists, the
+    mean is infinite; the bench asks for 5 or more draws).
     """
     v = np.asarray(variance, np.float64)
     w = np.where(np.isfinite(v) & (v > 0), 1.0 / np.where(v > 0, v, 1.0), 0.0)
@@ -204,10 +208,6 @@ def _common(errors: list[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _point_bounds(renderer: Any, scene: Any, frame: int) -> tuple[np.ndarray, np.ndarray]:
     """(cells ascending, image bound m^2 of each cell's 3-D point) in frame ``frame``."""
-    from tactile_sl_decoder.stereo.stereo import StereoRig
-    from tactile_sl_decoder.tooling.centre_bound import frame_point_bounds
-    from tactile_sl_sim.optics import RigParams
-
     rig = StereoRig(renderer.rig.left_info, renderer.rig.right_info)
     spacing_px = RigParams.GLYPH_SPACING_PX * scene.rig.focal[0] / RigParams().focal[0]
     contacts, nuisances = scene.contacts_at(frame), scene.nuisances_at(frame)
