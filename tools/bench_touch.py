@@ -6,6 +6,7 @@
     python tools/bench_touch.py --no-slip        # without the slip scenes
     python tools/bench_touch.py --no-shapes      # without the indenter shape scenes
     python tools/bench_touch.py --compare        # lighting table without and with weights
+    python tools/bench_touch.py --no-slip --no-shapes --light-seeds 11 12 13 14 15 16 --bound
 
 Runs the evaluation of ``tactile-sl evaluate`` (pipeline + touch stage, each frame decoded
 once, reference = the first frame) over bags/touch_halfspace.mcap and
@@ -36,6 +37,10 @@ of them, the worst frame of any draw (one draw's worst can be luck: docs/touch.m
 frame's figures depend on the noise draw").  ``--compare`` evaluates every touch bag and scene
 twice, without the per-cell weights (``WeightParams.enabled = False``, the touch stage before
 issue 25) and with them, and prints both side by side, with both touch stage times.
+``--bound`` (with five or more ``--light-seeds``) adds, per scene and load, the touch stage's
+scatter over the draws beside the Cramer-Rao bound of the load's normal force and centroid,
+from the draws' own displacement noise and from the images' point bounds
+(tactile_sl_decoder/tooling/touch_bound.py; docs/touch.md, "What the images allow").
 
 Last the touch stage's time per frame (``TouchResult.timings_ms['touch']``) and its slip
 estimate's part (``['slip']``) beside the pipeline's own time per stereo pair
