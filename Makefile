@@ -63,7 +63,7 @@ bench: setup
 	@$(ENV) python tools/bench_calibration.py
 	@$(ENV) nice -n 10 python tools/bench_sweep.py --bound
 	@$(ENV) python tools/bench_touch.py
-	@$(ENV) python tools/bench_touch.py --no-slip --no-shapes --repeat 1 --light-seeds 11 12 13 14 15 16 --per-draw --bound
+	@$(ENV) python tools/bench_touch.py --no-slip --no-shapes --repeat 1 --light-seeds 11 12 13 14 15 16 --per-draw --bound --bound-pictures out/touch_bound
 	@$(ENV) python tools/bench_viewer.py
 
 clean:

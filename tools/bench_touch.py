@@ -147,6 +147,10 @@ def main() -> int:
                         "lighting scene's normal force and centroid per load, from the draws' "
                         "displacement noise and from the images' point bounds, beside the "
                         "touch stage's scatter over the draws (about 20 s per scene)")
+    parser.add_argument("--bound-pictures", type=pathlib.Path, metavar="DIR",
+                        help="with --bound: each lighting scene's lightest load as a picture "
+                        "in DIR (the displacement noise as measured and as the images allow "
+                        "it, and where the best normal force's noise comes from)")
     parser.add_argument("--artwork-fit", action="store_true",
                         help="the decoder's artwork fit on (artwork_fit.enabled: glyph centres "
                         "fitted with the printed artwork)")
@@ -157,6 +161,8 @@ def main() -> int:
     if args.bound and (args.no_light or len(set(args.light_seeds)) < 5):
         parser.error("--bound needs the lighting scenes with --light-seeds of 5 or more seeds "
                      "(each cell's noise is its variance over the draws)")
+    if args.bound_pictures is not None and not args.bound:
+        parser.error("--bound-pictures needs --bound")
     with tempfile.TemporaryDirectory(prefix="bench_touch_") as tmp:
         shape_bags = ([] if args.no_shapes else
                       render_scenes(args.shape_scenes, pathlib.Path(tmp) / "shapes", []))
@@ -221,7 +227,8 @@ def _run(args: argparse.Namespace, slip_bags: list[tuple[str, pathlib.Path, Sens
                 if light_report and args.per_draw:
                     light_report += "\n\n" + light_draws_table(draws)
                 if light_report and args.bound:
-                    light_report += "\n\n" + light_bound_table(args.light_scenes, noise, draws)
+                    light_report += "\n\n" + light_bound_table(args.light_scenes, noise, draws,
+                                                                     args.bound_pictures)
                 slip_report = format_slip_report(per_scene) if per_scene else None
                 shape_report = format_shape_report(per_shape) if per_shape else None
     finally:

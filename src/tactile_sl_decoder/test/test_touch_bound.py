@@ -17,6 +17,7 @@ from tactile_sl_decoder.tooling.touch_bound import (
     load_bound,
     load_jacobian,
     scene_bounds,
+    smooth_variance,
     within_share,
 )
 from tactile_sl_decoder.touch.reference import nominal_positions
@@ -105,6 +106,23 @@ def test_draw_variance_removes_the_shared_bias_and_needs_two_draws():
         draw_variance(errors[:1])
 
 
+def test_smooth_variance_averages_each_cells_present_neighbours():
+    rows, cols = np.divmod(np.arange(25), 5)
+    keep = np.ones(25, bool)
+    keep[12] = False                                   # the centre cell missing
+    var = np.arange(25, dtype=np.float64)[:, None] * np.array([1.0, 2.0, 3.0])
+    out, count = smooth_variance(var[keep], rows[keep], cols[keep])
+    assert count[0] == 4 and count[list(np.flatnonzero(keep)).index(1)] == 6
+    assert count[list(np.flatnonzero(keep)).index(6)] == 8       # a neighbour of the hole
+    np.testing.assert_allclose(out[0], np.mean([0, 1, 5, 6]) * np.array([1.0, 2.0, 3.0]))
+    # noisy sample variances of one true variance come out closer to it
+    rng = np.random.default_rng(4)
+    rows, cols = np.divmod(np.arange(400), 20)
+    sample = rng.chisquare(5, (400, 3)) / 5
+    smooth, _ = smooth_variance(sample, rows, cols)
+    assert smooth.std() < 0.45 * sample.std()
+
+
 def test_image_variance_splits_the_point_bound_as_the_measured_noise():
     out = image_variance(np.array([[1.0, 1.0, 8.0], [0.0, 0.0, 0.0]]), np.array([5.0, 3.0]))
     np.testing.assert_allclose(out, [[0.5, 0.5, 4.0], [1.0, 1.0, 1.0]])
@@ -168,3 +186,27 @@ def test_the_image_bound_of_a_frame_is_below_noisier_points():
     assert b.images is not None
     assert 0 < b.images.normal_force_sd < 0.5 * b.points.normal_force_sd
     assert 0 < b.images.centre_rms < 0.5 * b.points.centre_rms
+
+
+def test_variance_shares_sum_to_the_bound_and_lie_where_the_information_is(tmp_path):
+    """The efficient estimate's variance split over the cells (shares summing to 1); the cells
+    that carry most of it lie near the load (its field changes there); the picture shows it."""
+    import cv2
+
+    from tactile_sl_decoder.tooling.light_report import write_bound_picture
+    from tactile_sl_decoder.tooling.touch_bound import FrameBound, variance_shares
+
+    cells = _cells()
+    load = _load()
+    jac = load_jacobian(load, cells)
+    var = np.tile(np.array([3e-6, 3e-6, 9e-6]) ** 2, (len(cells), 1))
+    share = variance_shares(jac, var)
+    assert share.min() >= 0 and share.sum() == pytest.approx(1.0)
+    distance = np.hypot(*(cells - [load.x, load.y]).T)
+    assert share[distance < 1.5 * load.radius].sum() > 0.7
+    bound = load_bound(jac, var)
+    picture = write_bound_picture(tmp_path / "b.png", "synthetic", FrameBound(
+        1, load, np.array(load.force), len(cells), 8, bound, bound, cells, var, var, share))
+    image = cv2.imread(str(picture))
+    assert image is not None and image.shape[1] > 3 * image.shape[0] > 0
+    assert list(tmp_path.iterdir()) == [picture]           # no temporary file left

@@ -11,9 +11,13 @@ from __future__ import annotations
 import pathlib
 import sys
 
+import cv2
 import numpy as np
 
+from tactile_sl_common.safe_files import atomic_path
+from tactile_sl_decoder.tooling.pictures import render_cells
 from tactile_sl_decoder.tooling.touch_bound import (
+    FrameBound,
     centre_within_share,
     scene_bounds,
     within_share,
@@ -67,14 +71,16 @@ def light_draws_table(draws: list[tuple[str, str, list]]) -> str:
 
 
 def light_bound_table(scenes_file: pathlib.Path, noise: dict[str, list[dict]],
-                      draws: list[tuple[str, str, list]]) -> str:
+                      draws: list[tuple[str, str, list]],
+                      pictures: pathlib.Path | None = None) -> str:
     """Per lighting scene and load: the touch stage's scatter over the draws beside its bound.
 
     The bound (:mod:`tactile_sl_decoder.tooling.touch_bound`) of an unbiased estimator that
     knows the load's profile but not its force, centre or radius: from the draws' measured
     displacement noise ("points") and from the images' point bounds ("images").  The last
     columns: the chance that an estimator at the images' bound meets the harsh rows' limits
-    (force within 2 %, centroid within 0.1 mm) in one draw and in every draw.
+    (force within 2 %, centroid within 0.1 mm) in one draw and in every draw.  ``pictures``:
+    a folder for each scene's picture of its lightest load (:func:`write_bound_picture`).
     """
     scenes = {s.name: s for s in load_scenes(scenes_file)}
     cache = RendererCache()
@@ -90,7 +96,12 @@ def light_bound_table(scenes_file: pathlib.Path, noise: dict[str, list[dict]],
         sys.stderr.write(f"bound: {name}\n")
         scene = scenes[name]
         runs = [frames for scene_name, _, frames in draws if scene_name == name]
-        for b in scene_bounds(scene, scene_draws, cache.get(scene)):
+        bounds = scene_bounds(scene, scene_draws, cache.get(scene))
+        if pictures is not None and bounds:
+            lightest = min(bounds, key=lambda b: -float(b.force[2]))
+            path = write_bound_picture(pictures / f"touch_bound_{name}.png", name, lightest)
+            sys.stderr.write(f"bound: wrote {path}\n")
+        for b in bounds:
             stamp = scene.stamp_ns(b.frame)
             same = [f for frames in runs for f in frames if f.stamp_ns == stamp]
             fn = -float(b.force[2])
@@ -145,3 +156,38 @@ def light_table(compared: list[tuple[str, list, list]], both: bool) -> str:
     lines.append("limits (issue 25, harsh rows): dRMSE <= 2 x clean, dCen <= 0.1 mm, "
                  "force within 2 %; clean rows and bags: no worse")
     return "\n".join(lines)
+
+
+def write_bound_picture(path: pathlib.Path, scene: str, bound: FrameBound) -> pathlib.Path:
+    """Three maps of one loaded frame's cells side by side, as a PNG at ``path``.
+
+    The normal displacement's noise as the draws measured it and as the images allow it
+    (standard deviation, um, one colour scale), and each cell's share of the efficient
+    normal force estimate's variance (%): where the force's noise comes from.  The white
+    circle is the load's disc.
+    """
+    xy = 1e3 * bound.rest_xy
+    pitch = float(np.median(np.abs(np.diff(np.unique(np.round(xy[:, 0], 4))))))
+    circle = (1e3 * bound.load.x, 1e3 * bound.load.y, 1e3 * bound.load.reach)
+    fn = -float(bound.force[2])
+    measured = 1e6 * np.sqrt(bound.noise[:, 2])
+    allowed = (None if bound.image_noise is None else 1e6 * np.sqrt(bound.image_noise[:, 2]))
+    top = float(np.percentile(measured, 99))
+    panels = [render_cells(xy, measured, pitch, f"{scene} {fn:.2f} N: u_z noise, draws", "um",
+                           vmax=top, circle=circle)]
+    if allowed is not None:
+        panels.append(render_cells(xy, allowed, pitch, "u_z noise the images allow", "um",
+                                   vmax=top, circle=circle))
+    panels.append(render_cells(xy, 100.0 * bound.force_share, pitch,
+                               "share of the best Fn's variance", "%", circle=circle,
+                               colormap=cv2.COLORMAP_VIRIDIS))
+    height = max(p.shape[0] for p in panels)
+    image = np.hstack([np.pad(p, ((0, height - p.shape[0]), (0, 0), (0, 0)),
+                              constant_values=255) for p in panels])
+    ok, png = cv2.imencode(".png", image)
+    if not ok:
+        raise ValueError(f"cannot encode the picture for {path}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(png.tobytes())
+    return path

@@ -221,6 +221,39 @@ def render_pressure(field_points: np.ndarray, pitch: float, title: str = "") -> 
     return plot.img
 
 
+def render_cells(xy_mm: np.ndarray, values: np.ndarray, pitch_mm: float, title: str,
+                 unit: str, vmax: float | None = None,
+                 circle: tuple[float, float, float] | None = None,
+                 colormap: int = cv2.COLORMAP_INFERNO) -> np.ndarray:
+    """BGR picture of one value per cell (a square of one pitch at its rest position).
+
+    Pad frame, axes in mm; NaN cells grey; ``vmax`` the colour bar's top (default: a round
+    number above the largest value); ``circle`` (x, y, r) mm drawn in white (a contact).
+    """
+    xy = np.asarray(xy_mm, np.float64).reshape(-1, 2)
+    v = np.asarray(values, np.float64).reshape(-1)
+    half = pitch_mm / 2
+    extent = ((xy[:, 0].min() - half, xy[:, 0].max() + half,
+               xy[:, 1].min() - half, xy[:, 1].max() + half) if len(xy) else (-1, 1, -1, 1))
+    plot = _Plot(extent, title, plot_px=420)
+    top = _ceiling(float(np.nanmax(v, initial=0.0))) if vmax is None else vmax
+    colours = _colours(v, top, colormap)
+    colours[~np.isfinite(v)] = _GREY_BGR
+    for (x, y), c in zip(xy, colours):                        # drawing only
+        u0, v0 = plot.px(x - half, y + half)
+        u1, v1 = plot.px(x + half, y - half)
+        cv2.rectangle(plot.img, (int(round(float(u0))), int(round(float(v0)))),
+                      (int(round(float(u1))), int(round(float(v1)))),
+                      tuple(int(k) for k in c), -1)
+    if circle is not None:
+        (u, w), r = plot.px(circle[0], circle[1]), circle[2] * plot.scale
+        cv2.circle(plot.img, (int(round(float(u))), int(round(float(w)))), int(round(r)),
+                   (255, 255, 255), 1, cv2.LINE_AA)
+    plot.axes()
+    plot.colour_bar(top, unit, colormap, "none" if not np.all(np.isfinite(v)) else "")
+    return plot.img
+
+
 def render_depth(depth: np.ndarray, x0: float, y0: float, resolution: float,
                  title: str = "") -> np.ndarray:
     """BGR picture of a depth map (m of indentation; NaN grey), colour bar in um, axes in mm.

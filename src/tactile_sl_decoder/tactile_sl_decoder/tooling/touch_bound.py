@@ -23,10 +23,11 @@ derivatives are central differences of the model (exact for the force, which u i
 
 The variances come from repeated draws of the same scene (:func:`draw_variance`: each
 cell's sample variance over the draws, the displacement's error being that of the frame and
-of the reference together), or from the image bound of each point
+of the reference together, averaged over the cell's 3 x 3 neighbourhood:
+:func:`smooth_variance`), or from the image bound of each point
 (:func:`~tactile_sl_decoder.tooling.centre_bound.frame_point_bounds`, a 3-D mean square per
 point, split over the axes as the measured noise is: :func:`image_variance`).  Inverting a
-sample variance of k degrees of freedom overstates the information by (k - 1) / (k - 3) on
+sample variance of k degrees of freedom overstates the information by k / (k - 2) on
 average (the mean of an inverse chi-square), so the information from draws is scaled back by
 that factor.  No rclpy.
 """
@@ -42,7 +43,7 @@ from scipy.interpolate import RegularGridInterpolator
 from tactile_sl_common.elasticity import surface_displacement
 from tactile_sl_decoder.stereo.stereo import StereoRig
 from tactile_sl_decoder.tooling.centre_bound import frame_point_bounds
-from tactile_sl_sim.loads import LoadContact, load_traction
+from tactile_sl_sim.loads import LoadContact, is_load, load_traction
 from tactile_sl_sim.optics import RigParams
 
 PARAMETERS = ("fx", "fy", "fz", "x", "y", "radius")
@@ -104,6 +105,35 @@ def draw_variance(errors: np.ndarray) -> tuple[np.ndarray, int]:
     return e.var(axis=0, ddof=1), e.shape[0] - 1
 
 
+def smooth_variance(variance: np.ndarray, rows: np.ndarray, cols: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Each cell's variance averaged over the cells present in its 3 x 3 neighbourhood.
+
+    Returns the averaged (N, 3) variances and how many cells each average holds (N,).  A
+    sample variance of a few draws is itself noisy (of 5 degrees of freedom, one cell in a
+    hundred comes out below a quarter of its true value, and inverted it would claim four
+    times the information); the light, the shadows and the vignetting that set the noise
+    vary over several cells, so the neighbours' variances are samples of nearly the same one
+    (as :mod:`tactile_sl_decoder.touch.weights` averages its squared residuals).
+    """
+    v = np.asarray(variance, np.float64)
+    r = np.asarray(rows, np.int64) - int(np.min(rows, initial=0))
+    c = np.asarray(cols, np.int64) - int(np.min(cols, initial=0))
+    shape = (int(r.max(initial=0)) + 3, int(c.max(initial=0)) + 3)
+    total = np.zeros(shape + (3,))
+    count = np.zeros(shape)
+    total[r + 1, c + 1] = v
+    count[r + 1, c + 1] = 1.0
+    box_total = np.zeros((shape[0] - 2, shape[1] - 2, 3))
+    box_count = np.zeros((shape[0] - 2, shape[1] - 2))
+    for dr in (0, 1, 2):
+        for dc in (0, 1, 2):
+            box_total += total[dr:dr + shape[0] - 2, dc:dc + shape[1] - 2]
+            box_count += count[dr:dr + shape[0] - 2, dc:dc + shape[1] - 2]
+    n = box_count[r, c]
+    return box_total[r, c] / n[:, None], n
+
+
 def image_variance(measured: np.ndarray, point_bound_m2: np.ndarray) -> np.ndarray:
     """(N, 3) per-axis variances whose sum per cell is ``point_bound_m2`` (N,).
 
@@ -163,6 +193,24 @@ def load_bound(jacobian: np.ndarray, variance: np.ndarray, dof: int | None = Non
     return TouchBound(np.linalg.pinv(info, hermitian=True))
 
 
+def variance_shares(jacobian: np.ndarray, variance: np.ndarray, name: str = "fz") -> np.ndarray:
+    """(N,) each cell's share of the variance of the efficient estimate of one parameter.
+
+    The efficient (maximum-likelihood, linearised) estimate is theta = C J^T W d with
+    C = J^-1 the bound: parameter k takes r_i = (C J^T W)_k,i from cell i, whose noise adds
+    r_i^2 v_i to its variance; the shares sum to 1.  Where the force's noise comes from.
+    """
+    v = np.asarray(variance, np.float64)
+    w = np.where(np.isfinite(v) & (v > 0), 1.0 / np.where(v > 0, v, 1.0), 0.0)
+    jac = np.asarray(jacobian, np.float64)
+    cov = np.linalg.pinv(fisher_information(jac, v), hermitian=True)
+    k = PARAMETERS.index(name)
+    r = np.einsum("p,nap->na", cov[k], jac) * w
+    part = np.sum(r * r * np.where(w > 0, v, 0.0), axis=1)
+    total = float(part.sum())
+    return part / total if total > 0 else part
+
+
 def within_share(limit: float, sd: float) -> float:
     """Probability that an unbiased Gaussian estimate of scatter ``sd`` is within +-``limit``."""
     if not sd > 0:
@@ -189,11 +237,17 @@ class FrameBound:
     """The bounds of one loaded frame of a scene rendered in several draws."""
 
     frame: int                  # the scene's frame index
-    force: np.ndarray           # (3,) N, the true load
+    load: LoadContact           # the true load
+    force: np.ndarray           # (3,) N, the force it transmits
     cells: int                  # cells decoded in every draw
     draws: int
     points: TouchBound          # from the draws' measured displacement noise
     images: TouchBound | None   # from the images' point bounds (None: not computed)
+    rest_xy: np.ndarray         # (N, 2) m, the cells' rest positions
+    noise: np.ndarray           # (N, 3) m^2, the draws' displacement variance per axis
+    image_noise: np.ndarray | None   # (N, 3) m^2, the images' (None: not computed)
+    force_share: np.ndarray     # (N,) each cell's share of the efficient normal force's
+    """variance, with the draws' noise (:func:`variance_shares`)"""
 
 
 def _common(errors: list[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -243,20 +297,23 @@ def scene_bounds(scene: Any, draws: list[dict[int, Any]], renderer: Any | None =
     for frame in range(scene.frames):
         stamp = scene.stamp_ns(frame)
         frames = [d[stamp] for d in draws if stamp in d]
-        loads = [c for c in scene.contacts_at(frame) if getattr(c, "kind", "") == "load"
-                 and c.active]
+        loads = [c for c in scene.contacts_at(frame) if is_load(c) and c.active]
         if len(frames) < 2 or len(frames) < len(draws) or len(loads) != 1:
             continue
         cells, errors, rest_xy = _common(frames)
         variance, dof = draw_variance(errors)
+        variance, pooled = smooth_variance(variance, cells // 1_000_003, cells % 1_000_003)
+        dof *= int(np.median(pooled))
         jac = load_jacobian(loads[0], rest_xy)
-        images = None
+        images = image_noise = None
         if renderer is not None:
             if rest_table is None:
                 rest_table = _point_bounds(renderer, scene, 0)
             squared = (_lookup(rest_table, cells)
                        + _lookup(_point_bounds(renderer, scene, frame), cells))
-            images = load_bound(jac, image_variance(variance, squared))
-        out.append(FrameBound(frame, np.asarray(loads[0].applied_force, np.float64),
-                              len(cells), len(frames), load_bound(jac, variance, dof), images))
+            image_noise = image_variance(variance, squared)
+            images = load_bound(jac, image_noise)
+        out.append(FrameBound(frame, loads[0], np.asarray(loads[0].applied_force, np.float64),
+                              len(cells), len(frames), load_bound(jac, variance, dof), images,
+                              rest_xy, variance, image_noise, variance_shares(jac, variance)))
     return out
