@@ -92,3 +92,7 @@ def test_bench_touch_bound_needs_five_lighting_draws():
             capture_output=True, text=True, timeout=120, env=ros_env(next_domain_id()))
         assert out.returncode == 2, out.stderr[-2000:]
         assert "--bound needs the lighting scenes with --light-seeds of 5 or more" in out.stderr
+    out = subprocess.run(
+        [sys.executable, str(REPO / "tools" / "bench_touch.py"), "--bound-pictures", "pics"],
+        capture_output=True, text=True, timeout=120, env=ros_env(next_domain_id()))
+    assert out.returncode == 2 and "--bound-pictures needs --bound" in out.stderr
