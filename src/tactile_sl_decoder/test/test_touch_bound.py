@@ -210,3 +210,15 @@ def test_variance_shares_sum_to_the_bound_and_lie_where_the_information_is(tmp_p
     image = cv2.imread(str(picture))
     assert image is not None and image.shape[1] > 3 * image.shape[0] > 0
     assert list(tmp_path.iterdir()) == [picture]           # no temporary file left
+
+
+def test_a_frame_whose_draws_share_too_few_cells_has_no_bound():
+    scene = next(s for s in load_scenes(LIGHT_SCENES) if s.name == "light_clean")
+    rng = np.random.default_rng(5)
+    cells_xy = _cells(half=8)
+    draws = []
+    for d in range(6):          # each draw decodes other cells: 10 in common
+        keys = np.concatenate([np.arange(10), 100 + 100 * d + np.arange(50)]).astype(np.int64)
+        draws.append({scene.stamp_ns(1): DisplacementErrors(
+            keys, 1e-6 * rng.standard_normal((60, 3)), cells_xy[:60])})
+    assert scene_bounds(scene, draws) == []

@@ -50,6 +50,8 @@ PARAMETERS = ("fx", "fy", "fz", "x", "y", "radius")
 """What the estimator does not know: the force (N), the centre (m) and the profile's radius (m)."""
 _STEPS = np.array([1e-3, 1e-3, 1e-3, 2e-5, 2e-5, 5e-5])
 """Central-difference steps of :data:`PARAMETERS` (N, N, N, m, m, m)."""
+MIN_CELLS = 16
+"""A frame whose draws share fewer cells has no bound (the reference's own minimum)."""
 GRID_SPACING = 4e-5
 """m: the field grid of the model (the simulator's own, docs/camera.md)."""
 
@@ -301,6 +303,8 @@ def scene_bounds(scene: Any, draws: list[dict[int, Any]], renderer: Any | None =
         if len(frames) < 2 or len(frames) < len(draws) or len(loads) != 1:
             continue
         cells, errors, rest_xy = _common(frames)
+        if len(cells) < MIN_CELLS:
+            continue
         variance, dof = draw_variance(errors)
         variance, pooled = smooth_variance(variance, cells // 1_000_003, cells % 1_000_003)
         dof *= int(np.median(pooled))
