@@ -87,9 +87,10 @@ def light_bound_table(scenes_file: pathlib.Path, noise: dict[str, list[dict]],
     n_draws = max(len(v) for v in noise.values())
     lines = [f"bound ({n_draws} draws; Cramer-Rao, docs/touch.md 'What the images allow'): "
              f"sd of the normal force and rms of the centroid error, the touch stage's over "
-             f"the draws beside the bound from the points' noise and from the images; "
-             f"P: an estimator at the images' bound within 2 % and 0.1 mm, 1 draw / all",
-             f"{'scene':<20} {'Fn N':>5} {'sd Fn mN: touch':>16} {'points':>7} "
+             f"the draws beside the bound from the points' noise and from the images (and "
+             f"the touch stage's mean normal force error: its bias); P: an estimator at the "
+             f"images' bound within 2 % and 0.1 mm, 1 draw / all",
+             f"{'scene':<20} {'Fn N':>5} {'mean dFn mN':>12} {'sd Fn mN: touch':>16} {'points':>7} "
              f"{'images':>7} {'dCen rms mm: touch':>19} {'points':>7} {'images':>7} "
              f"{'P(Fn) 1 / all':>15} {'P(cen) 1 / all':>15}"]
     for name, scene_draws in noise.items():
@@ -114,7 +115,7 @@ def light_bound_table(scenes_file: pathlib.Path, noise: dict[str, list[dict]],
             p_fn = within_share(0.02 * fn, img.normal_force_sd)
             p_cen = centre_within_share(1e-4, img.centre_rms)
             lines.append(
-                f"{name:<20} {fn:5.2f} {1e3 * err.std(ddof=1):16.2f} "
+                f"{name:<20} {fn:5.2f} {1e3 * err.mean():+12.2f} {1e3 * err.std(ddof=1):16.2f} "
                 f"{1e3 * b.points.normal_force_sd:7.2f} {1e3 * img.normal_force_sd:7.2f} "
                 f"{1e3 * cen_rms:19.3f} {1e3 * b.points.centre_rms:7.3f} "
                 f"{1e3 * img.centre_rms:7.3f} "
@@ -144,7 +145,7 @@ def light_table(compared: list[tuple[str, list, list]], both: bool) -> str:
         return f"{text:>{width}}"
 
     for name, (old, new) in figures.items():
-        ratio_new = new["rmse"] / clean[1]["rmse"] if clean else np.nan
+        ratio_new = new["rmse"] / clean[1]["rmse"] if clean else np.nan   # nan: no clean scene
         ratio_old = (old["rmse"] / clean[0]["rmse"] if old is not None and clean
                      and clean[0] is not None else None)
         lines.append(f"{name:<20} {cell(_was(old, 'rmse'), new['rmse'], 1e6, '.2f', 16)} "
