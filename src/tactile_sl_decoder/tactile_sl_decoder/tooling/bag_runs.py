@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, TextIO
+from typing import Any, Callable, Iterator, TextIO
 
 import numpy as np
 
@@ -110,10 +110,33 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
     truths = {} if untouched else read_truths(path, namespace)
     if touch_params is None:
         touch_params = TouchParams(reference_frames=reference_frames)
+    name = Path(path).stem
+    out: list[TouchFrameMetrics] = []
+    for frame, truth, outputs in _touched_frames(path, pipeline, sensor, touch_params,
+                                                 namespace, truths, untouched, on_skip,
+                                                 progress, max_frames):
+        result, touch = outputs.stereo, outputs.touch.result
+        m = compare_frame(touch, truth, name, frame.stamp_ns)
+        m.timings_ms = {"pipeline": float(result.timings_ms.get("total", NAN))}
+        if touch is not None:
+            m.timings_ms["touch"] = float(touch.timings_ms.get("touch", NAN))
+            m.timings_ms["slip"] = float(touch.timings_ms.get("slip", NAN))
+        out.append(m)
+    return out
+
+
+def _touched_frames(path: str | Path, pipeline: Any, sensor: Any, touch_params: TouchParams,
+                    namespace: str, truths: dict[int, Any], untouched: bool = False,
+                    on_skip: SkipCallback | None = None, progress: TextIO | None = None,
+                    max_frames: int = 0) -> Iterator[tuple[Any, Any, SensorOutputs]]:
+    """(frame, its truth, its outputs) of every frame of a bag after the touch reference.
+
+    Frames without a truth are passed over unless ``untouched`` (truth None then); a frame
+    with unusable input goes to ``on_skip`` (raised without one).
+    """
     step = SensorStep(pipeline, sensor, touch_params)
     name = Path(path).stem
-    total = count_bag_frames(path, namespace)
-    out: list[TouchFrameMetrics] = []
+    total = count_bag_frames(path, namespace) if progress is not None else 0
     step.forget_frames()           # a bag is a stream of its own: nothing from the last one
     for i, frame in enumerate(bag_frames(path, namespace, ground_truth=False)):
         if max_frames and i >= max_frames:
@@ -125,20 +148,11 @@ def evaluate_touch_bag(path: str | Path, pipeline: Any, sensor: Any, reference_f
             continue
         was_ready = step.touch_ready
         outputs = _process(step, frame, on_skip)
-        if outputs is None:
-            continue
-        result, touch = outputs.stereo, outputs.touch.result
-        if not was_ready:
-            continue                       # a reference frame (or the reference failed)
-        m = compare_frame(touch, truth, name, frame.stamp_ns)
-        m.timings_ms = {"pipeline": float(result.timings_ms.get("total", NAN))}
-        if touch is not None:
-            m.timings_ms["touch"] = float(touch.timings_ms.get("touch", NAN))
-            m.timings_ms["slip"] = float(touch.timings_ms.get("slip", NAN))
-        out.append(m)
+        if outputs is None or not was_ready:
+            continue                       # bad input, or a reference frame
+        yield frame, truth, outputs
     if progress is not None:
         progress.write("\n")
-    return out
 
 
 @dataclass(frozen=True)
@@ -158,17 +172,12 @@ def displacement_errors(path: str | Path, pipeline: Any, sensor: Any,
     weights off: no cleaning, no fitted field), so that its errors are the points' own.
     """
     truths = read_truths(path, namespace)
-    step = SensorStep(pipeline, sensor, TouchParams(weights=WeightParams(enabled=False)))
-    step.forget_frames()
     out: dict[int, DisplacementErrors] = {}
-    for frame in bag_frames(path, namespace, ground_truth=False):
-        truth = truths.get(frame.stamp_ns)
-        if truth is None:
-            continue
-        was_ready = step.touch_ready
-        outputs = _process(step, frame, None)
-        result = None if outputs is None else outputs.touch.result
-        if not was_ready or result is None:
+    for frame, truth, outputs in _touched_frames(
+            path, pipeline, sensor, TouchParams(weights=WeightParams(enabled=False)),
+            namespace, truths):
+        result = outputs.touch.result
+        if result is None:
             continue
         key = result.rows.astype(np.int64) * 1_000_003 + result.cols
         tkey = truth.rows.astype(np.int64) * 1_000_003 + truth.cols

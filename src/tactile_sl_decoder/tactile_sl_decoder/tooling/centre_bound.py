@@ -124,6 +124,14 @@ def frame_point_bounds(renderer: Any, rig: Any, contacts: Any, nuisances: Any, s
     footprint and no other printed glyph. Returns the glyphs in the truth's order (visible,
     undamaged ones).
     """
+    return cell_point_bounds(renderer, rig, contacts, nuisances, seed, frame_index,
+                             spacing_px)[2]
+
+
+def cell_point_bounds(renderer: Any, rig: Any, contacts: Any, nuisances: Any, seed: int,
+                      frame_index: int, spacing_px: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`frame_point_bounds` with the cells they belong to: (rows, cols, bounds m^2)."""
     full, shares = glyph_shares(renderer, contacts, nuisances, seed, frame_index)
     t = full.truth
     keep = t.visible & ~t.damaged if t.damaged is not None else t.visible
@@ -137,8 +145,8 @@ def frame_point_bounds(renderer: Any, rig: Any, contacts: Any, nuisances: Any, s
         img, px = (full.left, t.px_left) if side == 0 else (full.right, t.px_right)
         covs[side, sel] = centre_covariance_bound(img, px[sel], half, read, shot,
                                                   glyph_signal=share)
-    return point_error_bound(rig, t.px_left[keep], t.px_right[keep], covs[0, keep],
-                             covs[1, keep])
+    return t.rows[keep], t.cols[keep], point_error_bound(
+        rig, t.px_left[keep], t.px_right[keep], covs[0, keep], covs[1, keep])
 
 
 def glyph_shares(renderer: Any, contacts: Any, nuisances: Any, seed: int,

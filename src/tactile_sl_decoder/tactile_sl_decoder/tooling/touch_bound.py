@@ -38,12 +38,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.interpolate import RegularGridInterpolator
 
-from tactile_sl_common.elasticity import surface_displacement
 from tactile_sl_decoder.stereo.stereo import StereoRig
-from tactile_sl_decoder.tooling.centre_bound import frame_point_bounds
-from tactile_sl_sim.loads import LoadContact, is_load, load_traction
+from tactile_sl_decoder.tooling.centre_bound import cell_point_bounds
+from tactile_sl_decoder.touch.weights import neighbourhood_mean
+from tactile_sl_sim.contact import FieldGrid, PadParams
+from tactile_sl_sim.loads import LoadContact, is_load
 from tactile_sl_sim.optics import RigParams
 
 PARAMETERS = ("fx", "fy", "fz", "x", "y", "radius")
@@ -57,14 +57,18 @@ GRID_SPACING = 4e-5
 
 
 def _field(load: LoadContact, rest_xy: np.ndarray, spacing: float) -> np.ndarray:
-    """(N, 3) displacement (m) of the cells at ``rest_xy`` under ``load`` (pad frame)."""
+    """(N, 3) displacement (m) of the cells at ``rest_xy`` under ``load`` (pad frame).
+
+    The simulator's own ground truth (:class:`tactile_sl_sim.contact.FieldGrid`) on a square
+    grid just covering the cells and the load.
+    """
     reach = load.reach + 2 * spacing
     half = max(float(np.abs(rest_xy).max()), abs(load.x) + reach, abs(load.y) + reach)
     half = spacing * math.ceil(half / spacing + 1)
-    xs = np.arange(-half, half + spacing / 2, spacing)
-    u = surface_displacement(load.elastomer, load_traction([load], xs, xs, spacing), spacing)
-    return np.stack([RegularGridInterpolator((xs, xs), u[:, :, k])(rest_xy[:, ::-1])
-                     for k in range(3)], axis=1)
+    n = int(round(2 * half / spacing)) + 1
+    grid = FieldGrid.build([load], PadParams(), x0=-half, y0=-half, spacing=spacing,
+                           nx=n, ny=n)
+    return grid.sample(rest_xy[:, 0], rest_xy[:, 1])
 
 
 def load_jacobian(load: LoadContact, rest_xy: np.ndarray,
@@ -118,22 +122,10 @@ def smooth_variance(variance: np.ndarray, rows: np.ndarray, cols: np.ndarray
     vary over several cells, so the neighbours' variances are samples of nearly the same one
     (as :mod:`tactile_sl_decoder.touch.weights` averages its squared residuals).
     """
-    v = np.asarray(variance, np.float64)
     r = np.asarray(rows, np.int64) - int(np.min(rows, initial=0))
     c = np.asarray(cols, np.int64) - int(np.min(cols, initial=0))
-    shape = (int(r.max(initial=0)) + 3, int(c.max(initial=0)) + 3)
-    total = np.zeros(shape + (3,))
-    count = np.zeros(shape)
-    total[r + 1, c + 1] = v
-    count[r + 1, c + 1] = 1.0
-    box_total = np.zeros((shape[0] - 2, shape[1] - 2, 3))
-    box_count = np.zeros((shape[0] - 2, shape[1] - 2))
-    for dr in (0, 1, 2):
-        for dc in (0, 1, 2):
-            box_total += total[dr:dr + shape[0] - 2, dc:dc + shape[1] - 2]
-            box_count += count[dr:dr + shape[0] - 2, dc:dc + shape[1] - 2]
-    n = box_count[r, c]
-    return box_total[r, c] / n[:, None], n
+    shape = (int(r.max(initial=0)) + 1, int(c.max(initial=0)) + 1)
+    return neighbourhood_mean(np.asarray(variance, np.float64), r, c, shape)
 
 
 def image_variance(measured: np.ndarray, point_bound_m2: np.ndarray) -> np.ndarray:
@@ -148,6 +140,12 @@ def image_variance(measured: np.ndarray, point_bound_m2: np.ndarray) -> np.ndarr
     return share * np.asarray(point_bound_m2, np.float64).reshape(-1, 1)
 
 
+def _inverse(variance: np.ndarray) -> np.ndarray:
+    """1 / variance, 0 where it is infinite, NaN or 0 (an axis that carries nothing)."""
+    v = np.asarray(variance, np.float64)
+    return np.where(np.isfinite(v) & (v > 0), 1.0 / np.where(v > 0, v, 1.0), 0.0)
+
+
 def fisher_information(jacobian: np.ndarray, variance: np.ndarray,
                        dof: int | None = None) -> np.ndarray:
     """(P, P) information of the parameters (Kay 1993, eq. 3.31, diagonal noise).
@@ -158,9 +156,8 @@ def fisher_information(jacobian: np.ndarray, variance: np.ndarray,
     chi-square, so that noisy variances do not overstate it (dof <= 2: none exists, the
     mean is infinite; the bench asks for 5 or more draws).
     """
-    v = np.asarray(variance, np.float64)
-    w = np.where(np.isfinite(v) & (v > 0), 1.0 / np.where(v > 0, v, 1.0), 0.0)
     jac = np.asarray(jacobian, np.float64)
+    w = _inverse(variance)
     info = np.einsum("nap,na,naq->pq", jac, w, jac)
     if dof is not None and dof > 2:
         info *= (dof - 2) / dof
@@ -203,7 +200,7 @@ def variance_shares(jacobian: np.ndarray, variance: np.ndarray, name: str = "fz"
     r_i^2 v_i to its variance; the shares sum to 1.  Where the force's noise comes from.
     """
     v = np.asarray(variance, np.float64)
-    w = np.where(np.isfinite(v) & (v > 0), 1.0 / np.where(v > 0, v, 1.0), 0.0)
+    w = _inverse(v)
     jac = np.asarray(jacobian, np.float64)
     cov = np.linalg.pinv(fisher_information(jac, v), hermitian=True)
     k = PARAMETERS.index(name)
@@ -266,12 +263,10 @@ def _point_bounds(renderer: Any, scene: Any, frame: int) -> tuple[np.ndarray, np
     """(cells ascending, image bound m^2 of each cell's 3-D point) in frame ``frame``."""
     rig = StereoRig(renderer.rig.left_info, renderer.rig.right_info)
     spacing_px = RigParams.GLYPH_SPACING_PX * scene.rig.focal[0] / RigParams().focal[0]
-    contacts, nuisances = scene.contacts_at(frame), scene.nuisances_at(frame)
-    bounds = frame_point_bounds(renderer, rig, contacts, nuisances, scene.seed, frame,
-                                spacing_px)
-    truth = renderer.render(contacts, nuisances, seed=scene.seed, frame_index=frame).truth
-    keep = truth.visible & (~truth.damaged if truth.damaged is not None else True)
-    keys = truth.rows[keep].astype(np.int64) * 1_000_003 + truth.cols[keep]
+    rows, cols, bounds = cell_point_bounds(renderer, rig, scene.contacts_at(frame),
+                                           scene.nuisances_at(frame), scene.seed, frame,
+                                           spacing_px)
+    keys = rows.astype(np.int64) * 1_000_003 + cols
     order = np.argsort(keys)
     return keys[order], np.asarray(bounds, np.float64)[order]
 

@@ -183,6 +183,26 @@ def scatter_error(rows: np.ndarray, cols: np.ndarray, variance: np.ndarray,
                       min_error)
 
 
+def neighbourhood_mean(values: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                       shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (N, 3) of ``values`` over the 3 x 3 cells around each cell, and their count (N,).
+
+    Only cells with finite values count; a cell with none around it gets 0 and count 0.
+    """
+    values = np.where(np.isfinite(values), values, np.nan)
+    grid = np.zeros(shape + (3,))
+    count = np.zeros(shape)
+    ok = np.isfinite(values).all(axis=1)
+    grid[rows[ok], cols[ok]] = values[ok]
+    count[rows[ok], cols[ok]] = 1.0
+    total = cv2.boxFilter(grid, -1, (3, 3), normalize=False,
+                          borderType=cv2.BORDER_CONSTANT)
+    n = cv2.boxFilter(count, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    counted = n[rows, cols]
+    mean: np.ndarray = total[rows, cols] / np.maximum(counted, 1.0)[:, None]
+    return mean, counted
+
+
 def _around(values2: np.ndarray, rows: np.ndarray, cols: np.ndarray,
             shape: tuple[int, int]) -> np.ndarray:
     """Mean (N, 3) of squared errors over the 3 x 3 cells around each cell (finite ones).
@@ -190,17 +210,8 @@ def _around(values2: np.ndarray, rows: np.ndarray, cols: np.ndarray,
     Noise varies smoothly with the light, and one cell's square is a poor estimate of its
     variance; a cell with no finite neighbour is not trusted (inf).
     """
-    values2 = np.where(np.isfinite(values2), values2, np.nan)
-    grid = np.zeros(shape + (3,))
-    count = np.zeros(shape)
-    ok = np.isfinite(values2).all(axis=1)
-    grid[rows[ok], cols[ok]] = values2[ok]
-    count[rows[ok], cols[ok]] = 1.0
-    total = cv2.boxFilter(grid, -1, (3, 3), normalize=False,
-                          borderType=cv2.BORDER_CONSTANT)
-    n = cv2.boxFilter(count, -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
-    mean2: np.ndarray = total[rows, cols] / np.maximum(n[rows, cols], 1.0)[:, None]
-    mean2[n[rows, cols] == 0] = np.inf        # no neighbours to judge by: not trusted
+    mean2, counted = neighbourhood_mean(values2, rows, cols, shape)
+    mean2[counted == 0] = np.inf              # no neighbours to judge by: not trusted
     return mean2
 
 
