@@ -171,6 +171,16 @@ def _colours(values: np.ndarray, vmax: float, colormap: int) -> np.ndarray:
     return cv2.applyColorMap((255 * t).astype(np.uint8).reshape(-1, 1), colormap)[:, 0]
 
 
+def _fill_cells(plot: _Plot, xy_mm: np.ndarray, half_mm: float, colours: np.ndarray) -> None:
+    """Each cell a filled square of side 2 ``half_mm`` at its (x, y) mm, in its BGR colour."""
+    for (x, y), c in zip(xy_mm, colours):                    # drawing only
+        u0, v0 = plot.px(x - half_mm, y + half_mm)
+        u1, v1 = plot.px(x + half_mm, y - half_mm)
+        cv2.rectangle(plot.img, (int(round(float(u0))), int(round(float(v0)))),
+                      (int(round(float(u1))), int(round(float(v1)))),
+                      tuple(int(k) for k in c), -1)          # 1 px overlap: no seams
+
+
 def render_pressure(field_points: np.ndarray, pitch: float, title: str = "") -> np.ndarray:
     """BGR picture of the per-cell pressure (kPa) with shear arrows, pad frame, axes in mm.
 
@@ -191,12 +201,7 @@ def render_pressure(field_points: np.ndarray, pitch: float, title: str = "") -> 
     vmax = _ceiling(float(p_kpa.max(initial=0.0)))
     cmap = cv2.COLORMAP_VIRIDIS
     colours = _colours(p_kpa, vmax, cmap)
-    for (x, y), c in zip(rest, colours):                     # drawing only
-        u0, v0 = plot.px(x - half, y + half)
-        u1, v1 = plot.px(x + half, y - half)
-        cv2.rectangle(plot.img, (int(round(float(u0))), int(round(float(v0)))),
-                      (int(round(float(u1))), int(round(float(v1)))),
-                      tuple(int(k) for k in c), -1)          # 1 px overlap: no seams
+    _fill_cells(plot, rest, half, colours)
     mag = np.hypot(ft[:, 0], ft[:, 1])
     big = float(mag.max(initial=0.0))
     if big > 0:
@@ -239,12 +244,7 @@ def render_cells(xy_mm: np.ndarray, values: np.ndarray, pitch_mm: float, title: 
     top = _ceiling(float(np.nanmax(v, initial=0.0))) if vmax is None else vmax
     colours = _colours(v, top, colormap)
     colours[~np.isfinite(v)] = _GREY_BGR
-    for (x, y), c in zip(xy, colours):                        # drawing only
-        u0, v0 = plot.px(x - half, y + half)
-        u1, v1 = plot.px(x + half, y - half)
-        cv2.rectangle(plot.img, (int(round(float(u0))), int(round(float(v0)))),
-                      (int(round(float(u1))), int(round(float(v1)))),
-                      tuple(int(k) for k in c), -1)
+    _fill_cells(plot, xy, half, colours)
     if circle is not None:
         (u, w), r = plot.px(circle[0], circle[1]), circle[2] * plot.scale
         cv2.circle(plot.img, (int(round(float(u))), int(round(float(w)))), int(round(r)),
