@@ -21,9 +21,13 @@ pytestmark = pytest.mark.ros     # starts processes (the command line, no DDS)
 
 @pytest.mark.parametrize("signum, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)])
 def test_replay_stopped_midway_leaves_no_temporary_file(tmp_path, signum, status):
-    out = tmp_path / "out.mcap"
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    out = run_dir / "out.mcap"
     # an empty cache: the reference's inversion is computed (~1 s), so the signal comes
-    # while the replay runs (read back from a cache, the 7 frames take 0.2 s in all)
+    # while the replay runs (read back from a cache, the 7 frames take 0.2 s in all).  The
+    # signal waits for the end of the frame it comes in (the frame finishes and may cache
+    # its reference, outside run_dir), then the replay unwinds.
     env = dict(os.environ, XDG_CACHE_HOME=str(tmp_path / "cache"))
     proc = subprocess.Popen([sys.executable, "-m", "tactile_sl_decoder.cli", "replay",
                              str(BAGS / "two_contacts.mcap"), "-o", str(out), "--no-progress"],
@@ -31,10 +35,10 @@ def test_replay_stopped_midway_leaves_no_temporary_file(tmp_path, signum, status
                             env=env)
     try:
         deadline = time.monotonic() + 60
-        while not list(tmp_path.glob(".out.mcap.*.tmp")) and time.monotonic() < deadline:
+        while not list(run_dir.glob(".out.mcap.*.tmp")) and time.monotonic() < deadline:
             assert proc.poll() is None, proc.communicate()[0]
             time.sleep(0.02)
-        assert list(tmp_path.glob(".out.mcap.*.tmp")), "replay never began writing"
+        assert list(run_dir.glob(".out.mcap.*.tmp")), "replay never began writing"
         # at once: the run has ~1.5 s left (the reference's inversion, then the frames);
         # 0.2 s later a loaded machine's run had once finished, and the signal came too late
         proc.send_signal(signum)
@@ -43,7 +47,7 @@ def test_replay_stopped_midway_leaves_no_temporary_file(tmp_path, signum, status
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == status, text
-    assert sorted(p.name for p in tmp_path.iterdir()) == [], text
+    assert sorted(p.name for p in run_dir.iterdir()) == [], text
     assert "Traceback" not in text, text
 
 

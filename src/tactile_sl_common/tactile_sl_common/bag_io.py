@@ -21,11 +21,9 @@ from __future__ import annotations
 import contextlib
 import os
 import pathlib
-import signal
 import struct
 import sys
 import tempfile
-import threading
 from dataclasses import dataclass
 from typing import Any, Iterable, Iterator
 
@@ -36,6 +34,8 @@ from mcap.stream_reader import CRCValidationError, StreamReader, get_chunk_data_
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import DecoderFunction, EncoderFunction, generate_dynamic, serialize_dynamic
+
+from tactile_sl_common import signals
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 CDR_HEADER_STAMP_OFFSET = 4  # after the 4-byte CDR encapsulation header
@@ -171,7 +171,7 @@ class BagWriter:
         self._sequence: dict[str, int] = {}
         fd = tmp = None
         try:
-            with _signals_held():
+            with signals.held(swap_handlers=True):
                 self.path.parent.mkdir(parents=True, exist_ok=True)
                 fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp",
                                            dir=self.path.parent)
@@ -277,35 +277,6 @@ class BagWriter:
             self.abort()
         except Exception:     # at interpreter exit the modules may be gone; nothing to do
             pass
-
-
-@contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM wait until the block is done (main thread).
-
-    Their Python handlers (KeyboardInterrupt, the command line's Terminated) raise wherever
-    the interpreter stands, even inside ``tempfile.mkstemp`` after the file exists.  For
-    the block their handlers only note the signal; after it the old handlers are back and
-    a noted signal is raised again, where the caller can still clean up.  (Not a signal
-    mask: another thread would take the signal and the main thread run its handler at
-    once.)
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    noted: list[int] = []
-
-    def note(signum: int, _frame: Any) -> None:
-        noted.append(signum)
-
-    previous = {s: signal.signal(s, note) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for held, handler in previous.items():
-            signal.signal(held, handler)
-        for signum in dict.fromkeys(noted):
-            signal.raise_signal(signum)
 
 
 # --------------------------------------------------------------------------- reading

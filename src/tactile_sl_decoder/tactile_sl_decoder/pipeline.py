@@ -26,6 +26,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from tactile_sl_common import signals
 from tactile_sl_common.camera_info import CameraInfoError
 from tactile_sl_decoder.camera_processes import CameraJob, CameraProcesses, camera_half
 from tactile_sl_decoder.classify.carry import CarryParams, LabelCarry, label_glyphs
@@ -186,6 +187,7 @@ class StereoPipeline:
         ra = fn(a)
         return ra, fb.result()
 
+    @signals.held()     # a signal waits for the end (tactile_sl_common.signals)
     def extract_pair(self, left_gray: np.ndarray, right_gray: np.ndarray
                      ) -> tuple[Glyphs, Glyphs]:
         """Glyph candidates (unlabelled) of both images."""
@@ -267,6 +269,7 @@ class StereoPipeline:
 
     # ------------------------------------------------------------------ whole frames
 
+    @signals.held()     # a signal waits for the end (tactile_sl_common.signals)
     def process(self, left_gray: np.ndarray, right_gray: np.ndarray, left_info: Any,
                 right_info: Any,
                 label_hook: Callable[[Glyphs, Glyphs], None] | None = None) -> StereoResult:
@@ -314,6 +317,7 @@ class StereoPipeline:
         result.timings_ms["total"] = 1e3 * (time.perf_counter() - t0)
         return result
 
+    @signals.held()     # a signal waits for the end (tactile_sl_common.signals)
     def process_symbols(self, left: Glyphs, right: Glyphs, left_info: Any,
                         right_info: Any, classify_unlabelled: bool = True) -> StereoResult:
         """Two labelled SymbolArrays (as :class:`Glyphs`) + CameraInfo -> points.

@@ -27,6 +27,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from tactile_sl_common import signals
 from tactile_sl_decoder.glyphs import Glyphs
 from tactile_sl_decoder.pipeline import StereoPipeline, StereoResult
 from tactile_sl_decoder.touch.driver import TouchDriver, TouchFrame
@@ -75,6 +76,7 @@ class SensorStep:
         """Touch outputs are on and a reference exists."""
         return self.touch is not None and self.touch.ready
 
+    @signals.held()     # a signal waits for the frame's end (tactile_sl_common.signals)
     def process(self, left_gray: np.ndarray, right_gray: np.ndarray, left_info: Any,
                 right_info: Any, tag: Any = None, camera_frame: str = "",
                 on_points: Callable[[StereoResult], None] | None = None,
@@ -91,6 +93,7 @@ class SensorStep:
                                        label_hook=label_hook)
         return self._touch(stereo, tag, camera_frame, on_points)
 
+    @signals.held()     # a signal waits for the frame's end (tactile_sl_common.signals)
     def process_symbols(self, left: Glyphs, right: Glyphs, left_info: Any, right_info: Any,
                         tag: Any = None, camera_frame: str = "",
                         on_points: Callable[[StereoResult], None] | None = None
@@ -111,6 +114,7 @@ class SensorStep:
             return SensorOutputs(stereo)
         return SensorOutputs(stereo, self.touch.frame(stereo.points, tag, frame_id))
 
+    @signals.held()     # a signal waits for the frame's end (tactile_sl_common.signals)
     def poll_touch(self) -> TouchFrame | None:
         """Between frames: install a reference prepared in the background, the backlog.
 

@@ -1,7 +1,10 @@
 """SensorStep: the node's way (background reference, backlog) and replay's give the same bytes."""
+import signal
+
 import numpy as np
 import pytest
 
+from tactile_sl_common import signals
 from tactile_sl_common.images import to_gray
 from tactile_sl_decoder.frames import bag_frames
 from tactile_sl_decoder.pipeline import PatternSpec, StereoPipeline
@@ -57,3 +60,27 @@ def test_live_and_offline_steps_give_every_frame_the_same_outputs():
     assert seen[0][2] is False and all(ready for _, _, ready in seen[1:])
     assert len(want) == len(frames) - 1 and got == want
     assert np.all([n > 0 for _, n, _ in seen])
+
+
+def test_a_signal_during_a_frame_is_raised_when_the_frame_is_done():
+    """Ctrl-C amid a frame's kernels would be raised inside their Python callbacks (a
+    SystemError, once a crash): under the command line's handlers it waits for the frame."""
+    frame = next(iter(bag_frames(BAG)))
+    step = _step(False)
+    done = []
+
+    def hook(_left, _right):                 # inside the pipeline, between its stages
+        signal.raise_signal(signal.SIGINT)
+        done.append("classified")
+
+    def on_points(_result):
+        done.append("points")
+    try:
+        with signals.as_exceptions(), pytest.raises(KeyboardInterrupt):
+            step.process(to_gray(frame.left_image), to_gray(frame.right_image),
+                         frame.left_info, frame.right_info, on_points=on_points,
+                         label_hook=hook)
+    finally:
+        step.close()
+    assert done == ["classified", "points"]
+    assert step.touch_ready                  # the frame's touch reference was taken whole

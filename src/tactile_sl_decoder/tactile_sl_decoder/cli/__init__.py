@@ -11,13 +11,14 @@ rather than discovered so that their order is stable.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
 import importlib.util
 import signal
 import sys
-import threading
-from typing import Iterator, Sequence
+from typing import Sequence
+
+from tactile_sl_common import signals
+from tactile_sl_common.signals import Terminated
 
 COMMANDS: dict[str, tuple[str, str]] = {
     # name: (module, one line for `tactile-sl --help`), in help order
@@ -41,6 +42,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
              "only is decoded first)"),
 }
 """Every subcommand; one whose package is not installed is left out."""
+
+__all__ = ["COMMANDS", "Terminated", "build_parser", "command_of", "main"]
 
 
 def _installed(module: str) -> bool:
@@ -70,36 +73,13 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised in the main thread like Ctrl-C's KeyboardInterrupt.
-
-    So every ``finally`` runs and every temporary output (``BagWriter``, ``atomic_path``)
-    is removed, instead of the process dying where it stands.
-    """
-
-
-def _terminate(signum: int, _frame: object) -> None:
-    raise Terminated(signum)
-
-
-@contextlib.contextmanager
-def _sigterm_as_exception() -> Iterator[None]:
-    """SIGTERM raises :class:`Terminated` for the block (main thread only)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGTERM, _terminate)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def _interrupt_behind(exc: SystemError) -> KeyboardInterrupt | None:
     """The Ctrl-C or SIGTERM a SystemError reports, if that is what it is.
 
-    A signal that comes while a compiled kernel (numba) runs, or while numba calls back into
-    Python (loading a cached kernel: ``_numba_unpickle``), is raised by its handler there, and
+    A frame's work holds the signals (:func:`tactile_sl_common.signals.held`); elsewhere (a
+    second Ctrl-C, a command's own compiled calls) a signal that comes while numba calls back
+    into Python (loading a cached kernel: ``_numba_unpickle``) is raised by its handler there,
+    and
     CPython reports it as the cause of a SystemError ("returned a result with an exception
     set"); the kernel's caller may wrap that SystemError in another one.
     """
@@ -118,7 +98,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     words = sys.argv[1:] if argv is None else list(argv)
     command = command_of(words)
     try:
-        with _sigterm_as_exception():   # from the start: the command's imports take a while
+        # from the start (the command's imports take a while); a frame's work holds them
+        with signals.as_exceptions():
             parser = build_parser(command)
             args = parser.parse_args(words)
             if not getattr(args, "func", None):
