@@ -21,7 +21,9 @@ when glyph centres came to weigh the reflectance (issue 25, 2026-12-04: every ba
 and touch outputs moved; robust_damaged_print gained a point, coverage 99.48 -> 99.53 %,
 0 wrong; docs/robustness.md, "Where the clean rows' error comes from"), and when
 ``max_depth`` came to undo a glyph's average of a curved surface (issue 25, 2026-12-07: the
-contact topic of twelve bags; the rest byte-identical).  A
+contact topic of twelve bags; the rest byte-identical), and when a region's centroid came
+from the map smoothed by one cell (issue 25, 2026-12-07: the contact topic of thirteen
+bags; the rest byte-identical).  A
 change that alters any output, even in the last bit, fails here; when a change is *meant*
 to alter them (a better decoder), record the digests again and say so in the commit.
 
