@@ -12,13 +12,15 @@ import pytest
 from tactile_sl_common import signals
 from tactile_sl_common.signals import Terminated
 
+EXCEPTIONS = [(signal.SIGINT, KeyboardInterrupt), (signal.SIGTERM, Terminated)]
+"""Each signal and the exception it raises under :func:`signals.as_exceptions`."""
+
 
 def _send(signum: int) -> None:
     signal.raise_signal(signum)        # the handler runs before the next bytecode
 
 
-@pytest.mark.parametrize("signum, raised", [(signal.SIGINT, KeyboardInterrupt),
-                                            (signal.SIGTERM, Terminated)])
+@pytest.mark.parametrize("signum, raised", EXCEPTIONS)
 def test_a_signal_outside_a_held_block_is_raised_at_once(signum, raised):
     reached = []
     with signals.as_exceptions():
@@ -28,8 +30,7 @@ def test_a_signal_outside_a_held_block_is_raised_at_once(signum, raised):
     assert reached == []
 
 
-@pytest.mark.parametrize("signum, raised", [(signal.SIGINT, KeyboardInterrupt),
-                                            (signal.SIGTERM, Terminated)])
+@pytest.mark.parametrize("signum, raised", EXCEPTIONS)
 def test_a_held_signal_is_raised_when_the_outermost_block_ends(signum, raised):
     reached = []
     with signals.as_exceptions():

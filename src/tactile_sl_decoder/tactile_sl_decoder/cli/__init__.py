@@ -79,9 +79,8 @@ def _interrupt_behind(exc: SystemError) -> KeyboardInterrupt | None:
     A frame's work holds the signals (:func:`tactile_sl_common.signals.held`); elsewhere (a
     second Ctrl-C, a command's own compiled calls) a signal that comes while numba calls back
     into Python (loading a cached kernel: ``_numba_unpickle``) is raised by its handler there,
-    and
-    CPython reports it as the cause of a SystemError ("returned a result with an exception
-    set"); the kernel's caller may wrap that SystemError in another one.
+    and CPython reports it as the cause of a SystemError ("returned a result with an
+    exception set"); the kernel's caller may wrap that SystemError in another one.
     """
     cause: BaseException | None = exc
     for _ in range(8):                      # a chain of SystemErrors, each the next's cause
