@@ -20,6 +20,7 @@ from tactile_sl_decoder.tooling.touch_bound import (
     smooth_variance,
     within_share,
 )
+from tactile_sl_decoder.tooling.touch_metrics import cell_keys, key_cells
 from tactile_sl_decoder.touch.reference import nominal_positions
 from tactile_sl_sim.loads import LoadContact
 from tactile_sl_sim.scenes import load_scenes
@@ -176,8 +177,8 @@ def test_the_image_bound_of_a_frame_is_below_noisier_points():
     truth = renderer.render(scene.contacts_at(1), scene.nuisances_at(1), seed=scene.seed,
                             frame_index=1).truth
     art = renderer.artwork
-    keys = np.sort(truth.rows.astype(np.int64) * 1_000_003 + truth.cols)
-    rest_xy = nominal_positions(keys // 1_000_003, keys % 1_000_003, (art.rows, art.cols),
+    keys = np.sort(cell_keys(truth.rows, truth.cols))
+    rest_xy = nominal_positions(*key_cells(keys), (art.rows, art.cols),
                                 art.pitch_m, scene.mirrored)[:, :2]
     rng = np.random.default_rng(2)
     draws = [{scene.stamp_ns(1): DisplacementErrors(

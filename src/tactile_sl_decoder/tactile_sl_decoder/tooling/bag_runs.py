@@ -32,6 +32,7 @@ from tactile_sl_decoder.tooling.touch_metrics import (
     NAN,
     TouchFrameMetrics,
     compare_frame,
+    matched_cells,
     read_truths,
 )
 from tactile_sl_decoder.touch.stage import TouchParams
@@ -159,7 +160,7 @@ def _touched_frames(path: str | Path, pipeline: Any, sensor: Any, touch_params: 
 class DisplacementErrors:
     """One frame's measured displacement minus the truth, per cell decoded in both (pad frame)."""
 
-    cells: np.ndarray      # (N,) row * 1_000_003 + col, ascending
+    cells: np.ndarray      # (N,) their keys (touch_metrics.cell_keys), ascending
     errors: np.ndarray     # (N, 3) m
     rest_xy: np.ndarray    # (N, 2) m, the cells' true rest positions
 
@@ -179,9 +180,7 @@ def displacement_errors(path: str | Path, pipeline: Any, sensor: Any,
         result = outputs.touch.result
         if result is None:
             continue
-        key = result.rows.astype(np.int64) * 1_000_003 + result.cols
-        tkey = truth.rows.astype(np.int64) * 1_000_003 + truth.cols
-        cells, i, j = np.intersect1d(key, tkey, assume_unique=True, return_indices=True)
+        cells, i, j = matched_cells(result.rows, result.cols, truth.rows, truth.cols)
         rest = np.asarray(truth.position, np.float64) - np.asarray(truth.displacement)
         out[frame.stamp_ns] = DisplacementErrors(
             cells, np.asarray(result.displacement, np.float64)[i] - truth.displacement[j],

@@ -41,6 +41,7 @@ import numpy as np
 
 from tactile_sl_decoder.stereo.stereo import StereoRig
 from tactile_sl_decoder.tooling.centre_bound import cell_point_bounds
+from tactile_sl_decoder.tooling.touch_metrics import cell_keys, key_cells
 from tactile_sl_decoder.touch.weights import neighbourhood_mean
 from tactile_sl_sim.contact import FieldGrid, PadParams
 from tactile_sl_sim.loads import LoadContact, is_load
@@ -266,7 +267,7 @@ def _point_bounds(renderer: Any, scene: Any, frame: int) -> tuple[np.ndarray, np
     rows, cols, bounds = cell_point_bounds(renderer, rig, scene.contacts_at(frame),
                                            scene.nuisances_at(frame), scene.seed, frame,
                                            spacing_px)
-    keys = rows.astype(np.int64) * 1_000_003 + cols
+    keys = cell_keys(rows, cols)
     order = np.argsort(keys)
     return keys[order], np.asarray(bounds, np.float64)[order]
 
@@ -301,7 +302,7 @@ def scene_bounds(scene: Any, draws: list[dict[int, Any]], renderer: Any | None =
         if len(cells) < MIN_CELLS:
             continue
         variance, dof = draw_variance(errors)
-        variance, pooled = smooth_variance(variance, cells // 1_000_003, cells % 1_000_003)
+        variance, pooled = smooth_variance(variance, *key_cells(cells))
         dof *= int(np.median(pooled))
         jac = load_jacobian(loads[0], rest_xy)
         images = image_noise = None

@@ -206,13 +206,33 @@ def _num(v: float) -> float | None:
 # ---------------------------------------------------------------------- one frame
 
 
+_KEY_COLS = 1_000_003
+"""Cell keys: row * this + col (more columns than any pattern has)."""
+
+
+def cell_keys(rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """One int64 key per (row, col) cell, ordered as the cells are by (row, col)."""
+    return np.asarray(rows, np.int64) * _KEY_COLS + np.asarray(cols, np.int64)
+
+
+def key_cells(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of :func:`cell_keys`' keys."""
+    return np.divmod(np.asarray(keys, np.int64), _KEY_COLS)
+
+
+def matched_cells(rows: np.ndarray, cols: np.ndarray, true_rows: np.ndarray,
+                  true_cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The cells in both lists (keys, ascending) and their indices in each: (keys, i, j)."""
+    keys, i, j = np.intersect1d(cell_keys(rows, cols), cell_keys(true_rows, true_cols),
+                                assume_unique=True, return_indices=True)
+    return keys, i, j
+
+
 def displacement_rmse(rows: np.ndarray, cols: np.ndarray, disp: np.ndarray,
                       true_rows: np.ndarray, true_cols: np.ndarray, true_disp: np.ndarray
                       ) -> tuple[float, int]:
     """3-D displacement RMSE (m) over the cells in both fields, matched by (row, col)."""
-    key = np.asarray(rows, np.int64) * 1_000_003 + np.asarray(cols, np.int64)
-    tkey = np.asarray(true_rows, np.int64) * 1_000_003 + np.asarray(true_cols, np.int64)
-    _, i, j = np.intersect1d(key, tkey, assume_unique=True, return_indices=True)
+    _, i, j = matched_cells(rows, cols, true_rows, true_cols)
     if len(i) == 0:
         return NAN, 0
     d = np.asarray(disp, np.float64)[i] - np.asarray(true_disp, np.float64)[j]
